@@ -1,0 +1,188 @@
+"""Build the MQA bin world in SAPIEN 3: ground, bin walls, objects, and (optionally) the camera.
+
+Scenes are always *rebuilt* from stored poses rather than restored in place: PhysX keeps contact
+and warm-start caches across ``unpack``, so an in-place restore does not replay the same physics,
+while a fresh build at the same poses is bit-identical (measured; see docs/platform.md).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import sapien
+
+from mqa_rl.sim.assets import ObjectAsset
+from mqa_rl.sim.geometry import BinSpec, CameraSpec
+
+TIMESTEP = 1 / 240            # physics step (s)
+FLOOR_COLOR = (0.55, 0.55, 0.55, 1.0)
+WALL_COLOR = (0.35, 0.40, 0.45, 1.0)
+OBJECT_MATERIAL = (0.6, 0.5, 0.0)   # static friction, dynamic friction, restitution
+MAX_DEPENETRATION_VELOCITY = 0.3    # m/s: objects pushed into each other separate gently
+
+_keep_alive: list = []
+
+
+def _keep_shaders_alive() -> None:
+    """Hold one tiny camera for the whole process: without a live camera every new scene recompiles
+    SAPIEN's shaders (~4 s each on lavapipe); with it a new scene with a camera costs ~0.1 s."""
+    if not _keep_alive:
+        scene = sapien.Scene()
+        cam = scene.add_camera("keep_alive", 8, 8, 1.0, 0.1, 1.0)
+        scene.update_render()
+        cam.take_picture()
+        _keep_alive.extend([scene, cam])
+
+
+def _visual(vertices: np.ndarray, faces: np.ndarray, rgba) -> sapien.render.RenderShapeTriangleMesh:
+    """A flat-shaded render mesh (vertices unshared so every face keeps its own normal)."""
+    tri = np.asarray(vertices, dtype=np.float64)[np.asarray(faces)]          # [F, 3, 3]
+    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+    v = tri.reshape(-1, 3).astype(np.float32)
+    f = np.arange(len(v), dtype=np.uint32).reshape(-1, 3)
+    n = np.repeat(normals, 3, axis=0).astype(np.float32)
+    uv = np.zeros((len(v), 2), dtype=np.float32)
+    return sapien.render.RenderShapeTriangleMesh(v, f, n, uv, sapien.render.RenderMaterial(base_color=list(rgba)))
+
+
+@dataclass
+class BinWorld:
+    """One SAPIEN scene holding the bin and its objects. ``objects[i]`` is the entity of ``assets[i]``."""
+
+    scene: sapien.Scene
+    assets: list[ObjectAsset]
+    objects: list[sapien.Entity]
+    bodies: list[sapien.physx.PhysxRigidDynamicComponent]
+    camera: sapien.render.RenderCameraComponent | None
+    bin: BinSpec
+    camera_spec: CameraSpec | None
+    static_entities: list[sapien.Entity] = field(default_factory=list)
+
+    # ----------------------------------------------------------------------------- state
+    def poses(self) -> np.ndarray:
+        """[N, 7] float64 (x, y, z, qw, qx, qy, qz) of every object."""
+        return np.array([np.concatenate([e.pose.p, e.pose.q]) for e in self.objects], dtype=np.float64)
+
+    def speeds(self) -> np.ndarray:
+        """[N] linear speed of every object (m/s)."""
+        return np.array([np.linalg.norm(b.linear_velocity) for b in self.bodies])
+
+    def all_asleep(self) -> bool:
+        return all(b.is_sleeping for b in self.bodies)
+
+    def step(self, n: int = 1) -> None:
+        for _ in range(n):
+            self.scene.step()
+
+    def settle(self, max_steps: int, check_every: int = 24) -> int:
+        """Step until every object sleeps (PhysX's own rest test) or ``max_steps``; returns steps run."""
+        steps = 0
+        while steps < max_steps:
+            self.step(check_every)
+            steps += check_every
+            if self.all_asleep():
+                break
+        return steps
+
+    def entity_ids(self) -> np.ndarray:
+        """[N] per-scene entity ids, the values of segmentation channel 1 for each object."""
+        return np.array([e.per_scene_id for e in self.objects], dtype=np.int64)
+
+    # ----------------------------------------------------------------------------- camera
+    def render(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(rgb uint8 [H, W, 3], depth float32 [H, W] metres along the view axis, entity ids int32 [H, W])."""
+        if self.camera is None:
+            raise RuntimeError("this BinWorld was built without a camera (build_world(..., camera=...))")
+        self.scene.update_render()
+        self.camera.take_picture()
+        rgb = self.camera.get_picture("Color")[..., :3]
+        rgb = np.clip(rgb * 255 + 0.5, 0, 255).astype(np.uint8)
+        pos = self.camera.get_picture("Position")
+        depth = np.where(pos[..., 3] < 1, -pos[..., 2], 0.0).astype(np.float32)
+        seg = self.camera.get_picture("Segmentation")[..., 1].astype(np.int32)
+        return rgb, depth, seg
+
+
+def _static_box(scene: sapien.Scene, half_size, position, rgba, render: bool) -> sapien.Entity:
+    entity = sapien.Entity()
+    body = sapien.physx.PhysxRigidStaticComponent()
+    body.attach(sapien.physx.PhysxCollisionShapeBox(np.asarray(half_size, np.float32), sapien.physx.PhysxMaterial(*OBJECT_MATERIAL)))
+    entity.add_component(body)
+    if render:
+        rb = sapien.render.RenderBodyComponent()
+        rb.attach(sapien.render.RenderShapeBox(np.asarray(half_size, np.float32), sapien.render.RenderMaterial(base_color=list(rgba))))
+        entity.add_component(rb)
+    entity.pose = sapien.Pose(np.asarray(position, np.float32))
+    scene.add_entity(entity)
+    return entity
+
+
+def _object_entity(asset: ObjectAsset, pose: np.ndarray, render: bool) -> tuple[sapien.Entity, sapien.physx.PhysxRigidDynamicComponent]:
+    entity = sapien.Entity()
+    entity.name = asset.name
+    body = sapien.physx.PhysxRigidDynamicComponent()
+    material = sapien.physx.PhysxMaterial(*OBJECT_MATERIAL)
+    for verts in asset.collision_parts:
+        shape = sapien.physx.PhysxCollisionShapeConvexMesh(np.asarray(verts, np.float32), np.ones(3, np.float32), material)
+        shape.set_density(asset.density)
+        body.attach(shape)
+    body.max_depenetration_velocity = MAX_DEPENETRATION_VELOCITY
+    entity.add_component(body)
+    if render:
+        rb = sapien.render.RenderBodyComponent()
+        for v in asset.visuals:
+            rb.attach(_visual(v.vertices, v.faces, v.color))
+        entity.add_component(rb)
+    entity.pose = sapien.Pose(np.asarray(pose[:3], np.float32), np.asarray(pose[3:7], np.float32))
+    return entity, body
+
+
+def build_world(
+    assets: list[ObjectAsset],
+    poses: np.ndarray,
+    *,
+    bin_spec: BinSpec = BinSpec(),
+    camera: CameraSpec | None = None,
+    asleep: bool = True,
+) -> BinWorld:
+    """A fresh scene with ``assets`` at ``poses`` [N, 7]. With ``camera`` it renders (needs Vulkan);
+    without, it is physics only. ``asleep`` puts the objects to sleep (settled scenes stay still)."""
+    render = camera is not None
+    if render:
+        _keep_shaders_alive()
+        scene = sapien.Scene()
+        scene.set_ambient_light([0.45, 0.45, 0.45])
+        scene.add_directional_light([0.3, 0.2, -1.0], [0.7, 0.7, 0.7])
+    else:
+        scene = sapien.Scene([sapien.physx.PhysxCpuSystem()])
+    scene.set_timestep(TIMESTEP)
+
+    h, t, wh = bin_spec.half, bin_spec.wall_thickness, bin_spec.wall_height
+    statics = [_static_box(scene, [1.0, 1.0, 0.05], [0, 0, -0.05], FLOOR_COLOR, render)]   # floor top at z = 0
+    for sx, sy in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+        half = [t / 2, h + t, wh / 2] if sx else [h + t, t / 2, wh / 2]
+        statics.append(_static_box(scene, half, [sx * (h + t / 2), sy * (h + t / 2), wh / 2], WALL_COLOR, render))
+
+    cam = None
+    if render:
+        cam = scene.add_camera("top", camera.width, camera.height, np.deg2rad(camera.fovy_deg), camera.near, camera.far)
+        cam.entity.pose = sapien.Pose(camera.position.astype(np.float32), camera.sapien_quaternion.astype(np.float32))
+    world = BinWorld(scene, [], [], [], cam, bin_spec, camera, statics)
+    for asset, pose in zip(assets, np.asarray(poses, dtype=np.float64)):
+        add_object(world, asset, pose)
+    if asleep:
+        for b in world.bodies:
+            b.put_to_sleep()
+    return world
+
+
+def add_object(world: BinWorld, asset: ObjectAsset, pose: np.ndarray) -> sapien.Entity:
+    """Add one object to a built world (rendered when the world has a camera)."""
+    entity, body = _object_entity(asset, pose, render=world.camera is not None)
+    world.scene.add_entity(entity)
+    world.assets.append(asset)
+    world.objects.append(entity)
+    world.bodies.append(body)
+    return entity

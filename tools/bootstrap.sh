@@ -1,0 +1,58 @@
+#!/usr/bin/env bash
+# Set up everything mqa_rl needs on a bare Debian 12 machine, idempotently:
+#   1. a virtualenv (.venv) with the pinned Python packages (requirements.lock),
+#   2. a Vulkan device SAPIEN can render with: when none is usable, Mesa >= 24.3 lavapipe
+#      from bookworm-backports (Debian 12's own Mesa 22 is too old; see docs/platform.md).
+# A second run only checks: the venv carries a stamp of the lock file it was built from.
+# Source it (`. tools/bootstrap.sh`) to get the venv activated in the calling shell.
+set -euo pipefail
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+VENV="${MQA_VENV:-$ROOT/.venv}"
+PY="${PYTHON:-python3}"
+LOCK="$ROOT/requirements.lock"
+log() { printf '[bootstrap] %s\n' "$*" >&2; }
+
+# --- 1. virtualenv + packages ------------------------------------------------------------
+stamp="$VENV/.mqa-lock-stamp"
+want="$(sha256sum "$LOCK" "$ROOT/pyproject.toml" | sha256sum | cut -d' ' -f1)"
+if [ ! -x "$VENV/bin/python" ]; then
+    log "creating virtualenv $VENV"
+    "$PY" -m venv "$VENV"
+fi
+if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
+    log "installing pinned packages (first run: several GB, a few minutes)"
+    "$VENV/bin/python" -m pip install -q --upgrade pip
+    "$VENV/bin/python" -m pip install -q -r "$LOCK"
+    "$VENV/bin/python" -m pip install -q --no-deps -e "$ROOT"
+    echo "$want" > "$stamp"
+else
+    log "virtualenv up to date"
+fi
+
+# --- 2. a Vulkan device for SAPIEN ---------------------------------------------------------
+vulkan_ok() { "$VENV/bin/python" -c "import sapien; sapien.render.RenderSystem()" >/dev/null 2>&1; }
+if vulkan_ok; then
+    log "Vulkan rendering device found"
+else
+    if [ "$(id -u)" != 0 ] || ! command -v apt-get >/dev/null; then
+        log "ERROR: SAPIEN found no Vulkan device. Install Mesa >= 24.3 (mesa-vulkan-drivers) or a GPU driver, as root."
+        exit 1
+    fi
+    . /etc/os-release
+    log "no usable Vulkan device: installing Mesa lavapipe from ${VERSION_CODENAME}-backports"
+    if [ "${VERSION_CODENAME:-}" = bookworm ]; then
+        echo "deb http://deb.debian.org/debian bookworm-backports main" > /etc/apt/sources.list.d/mqa-backports.list
+        apt-get update -qq
+        DEBIAN_FRONTEND=noninteractive apt-get install -y -qq -t bookworm-backports mesa-vulkan-drivers libvulkan1 >/dev/null
+    else
+        apt-get update -qq
+        DEBIAN_FRONTEND=noninteractive apt-get install -y -qq mesa-vulkan-drivers libvulkan1 >/dev/null
+    fi
+    if ! vulkan_ok; then
+        log "ERROR: still no Vulkan device after installing Mesa; run: $VENV/bin/python -c 'import sapien; sapien.render.RenderSystem()'"
+        exit 1
+    fi
+    log "Vulkan (lavapipe) ready"
+fi
+export PATH="$VENV/bin:$PATH"
+export VIRTUAL_ENV="$VENV"
