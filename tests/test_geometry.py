@@ -33,9 +33,9 @@ def test_quaternion_roundtrip():
 
 def test_polygon_mask_pixel_centre_rule():
     # a square covering u, v ∈ [2, 5]: pixel centres 2.5, 3.5, 4.5 are inside → 3 × 3 pixels
-    rows, cols, mask = convex_polygon_mask(np.array([[2, 2], [5, 2], [5, 5], [2, 5.0]]), 10, 10)
+    crop = convex_polygon_mask(np.array([[2, 2], [5, 2], [5, 5], [2, 5.0]]), 10, 10)
     full = np.zeros((10, 10), bool)
-    full[rows, cols] = mask
+    full[crop.r0:crop.r0 + crop.mask.shape[0], crop.c0:crop.c0 + crop.mask.shape[1]] = crop.mask
     assert full.sum() == 9 and full[2:5, 2:5].all()
     assert convex_polygon_mask(np.array([[1, 1], [2, 2], [3, 3.0]]), 10, 10) is None       # degenerate
     assert convex_polygon_mask(np.array([[-9, -9], [-5, -9], [-5, -5.0]]), 10, 10) is None  # off image

@@ -84,6 +84,7 @@ def generate_dataset(
     num_scenes: dict[str, int] | None = None,
     library=None,
     train_fraction: float = 0.7,
+    objects_per_scene: dict[str, int] | None = None,
     overwrite: bool = False,
     progress: bool = False,
 ) -> "MQADataset":
@@ -92,14 +93,16 @@ def generate_dataset(
     ``num_scenes`` maps difficulty (easy / medium / hard = 20 / 35 / 50 objects) to a scene count;
     the split is by scene, stratified by difficulty. ``library`` is None (the 60 procedural objects),
     a folder of user meshes ``<class>/<instance>/*.obj``, or a list of ``ObjectAsset``.
-    Everything derives from ``seed``: the same seed gives the same files, byte for byte.
+    ``objects_per_scene`` overrides the paper's object counts per level (for sparser or denser
+    scenes). Everything derives from ``seed``: the same seed gives the same files, byte for byte.
     """
     from mqa_rl.data.scenes import DIFFICULTIES, settle_scene
     from mqa_rl.data.stats import answer_statistics
     from mqa_rl.sim.silhouette import silhouettes
 
     num_scenes = dict(DEFAULT_NUM_SCENES if num_scenes is None else num_scenes)
-    unknown = set(num_scenes) - set(DIFFICULTIES)
+    per_level = {**DIFFICULTIES, **(objects_per_scene or {})}
+    unknown = (set(num_scenes) | set(per_level)) - set(DIFFICULTIES)
     if unknown:
         raise ValueError(f"unknown difficulty {sorted(unknown)}; allowed: {list(DIFFICULTIES)}")
     if not 0 < train_fraction < 1:
@@ -113,8 +116,8 @@ def generate_dataset(
     if max(per_class.values()) > 3:
         raise ValueError("at most 3 instances per class (COUNTING answers are 0-3)")
     for level, count in num_scenes.items():
-        if count and DIFFICULTIES[level] > len(assets):
-            raise ValueError(f"{level} scenes need {DIFFICULTIES[level]} objects; the library has {len(assets)}")
+        if count and not 1 <= per_level[level] <= len(assets):
+            raise ValueError(f"{level} scenes need {per_level[level]} objects; the library has {len(assets)}")
 
     bin_spec, camera = BinSpec(), CameraSpec()
     plan = [(level, i) for level in DIFFICULTIES for i in range(num_scenes.get(level, 0))]
@@ -133,7 +136,7 @@ def generate_dataset(
     for j in iterator:
         level, _ = plan[j]
         rng = np.random.default_rng([seed, j])
-        indices = np.sort(rng.choice(len(assets), DIFFICULTIES[level], replace=False))
+        indices = np.sort(rng.choice(len(assets), per_level[level], replace=False))
         settled = settle_scene(assets, indices, rng, bin_spec)
         attempts.append(settled.attempts)
         scene_id = f"scene_{j:03d}"
@@ -173,7 +176,7 @@ def generate_dataset(
     manifest = {
         "generator": f"mqa_rl {mqa_rl.__version__}",
         "seed": seed,
-        "config": {"num_scenes": num_scenes, "train_fraction": train_fraction,
+        "config": {"num_scenes": num_scenes, "objects_per_scene": per_level, "train_fraction": train_fraction,
                    "bin": vars(bin_spec), "camera": vars(camera)},
         "counts": {"objects": len(assets), "classes": len(classes), "scenes": len(scenes), "questions": len(lines)},
         "drop_attempts": {"total": int(sum(attempts)), "max": int(max(attempts, default=0))},

@@ -1,0 +1,246 @@
+"""SapienBinEnv: the MQA bin scene on SAPIEN 3 physics as a TorchRL environment.
+
+Task sheet
+----------
+* **Scene**: one of the dataset's settled bin scenes (20 / 35 / 50 objects), rebuilt from its stored
+  poses at every reset (bit-identical physics; an in-place restore is not).
+* **Question**: sampled from the chosen split / difficulty levels / question types, or fixed with
+  ``env.reset(question_id="scene_003/counting/can")`` (or a ``"reset_question"`` index into
+  ``MQADataset.questions`` in the reset tensordict, for batched and remote envs).
+* **Observation**: ``rgb`` uint8 [3, H, W], ``depth`` float32 [1, H, W] (metres), ``question`` int64
+  tokens [L], and ``info`` measurements (see ``mqa_rl.keys``): object positions, visible area A_s,
+  full projected area A_t, overlap χ, target mask, stop flag, executed push.
+* **Action**: ``Categorical(6273)``; see ``mqa_rl.envs.actions`` for the layout (8 directions × 28 ×
+  28 cells, then stop). A push starts at the surface point under the cell centre (from depth),
+  travels a quarter of the image width measured on the bin floor, then the finger lifts away and
+  the scene settles (until every body sleeps or moves slower than ``settle_speed``, at most
+  ``settle_steps``).
+* **Episode end**: stop → ``terminated``; ``max_pushes`` pushes → ``truncated``.
+* **Reward**: always 0 here. The env measures; ``mqa_rl.transforms`` turn measurements into reward.
+
+>>> env = SapienBinEnv("data/mqa", split="train", question_types=["counting"])   # doctest: +SKIP
+>>> td = env.reset(question_id="scene_000/counting/can")                          # doctest: +SKIP
+>>> td = env.rand_step(td)                                                        # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from tensordict import TensorDict, TensorDictBase
+from torchrl.data import Binary, Bounded, Categorical, Composite, Unbounded
+from torchrl.envs import EnvBase
+
+from mqa_rl import keys
+from mqa_rl.data.dataset import MQADataset
+from mqa_rl.envs import actions
+from mqa_rl.sim.geometry import CameraSpec
+from mqa_rl.sim.pusher import FingerPusher, Pusher, PushResult
+from mqa_rl.sim.scene import BinWorld, build_world
+from mqa_rl.sim.silhouette import SilhouetteProjector
+
+MAX_OBJECTS = 50
+RESET_QUESTION = "reset_question"     # optional int64 [1] in a reset tensordict: a question index
+
+
+class SapienBinEnv(EnvBase):
+    """The MQA bin scene (see the module docstring for the task sheet)."""
+
+    def __init__(
+        self,
+        dataset: MQADataset | str,
+        *,
+        split: str | None = "train",
+        difficulties=None,
+        question_types=None,
+        image_size: int = 224,
+        max_pushes: int = 10,
+        settle_steps: int = 240,
+        settle_speed: float = 0.005,
+        pusher: Pusher | None = None,
+        seed: int | None = None,
+        device="cpu",
+    ):
+        super().__init__(device=device, batch_size=torch.Size([]))
+        self.dataset = dataset if isinstance(dataset, MQADataset) else MQADataset(dataset)
+        self.questions = self.dataset.select(split, difficulties, question_types)
+        if not self.questions:
+            raise ValueError(f"no question in {self.dataset.root} matches split={split!r}, "
+                             f"difficulties={difficulties!r}, question_types={question_types!r}")
+        if max_pushes < 1:
+            raise ValueError(f"max_pushes must be ≥ 1, got {max_pushes}")
+        base = self.dataset.camera
+        self.camera = CameraSpec(image_size, image_size, base.fovy_deg, base.distance, base.near, base.far)
+        self.push_length = self.camera.floor_width() / 4
+        self.max_pushes = max_pushes
+        self.settle_steps = settle_steps
+        self.settle_speed = settle_speed
+        self.pusher = pusher if pusher is not None else FingerPusher()
+        self.question_length = max(len(q.tokens) for q in self.dataset.questions)
+        self._question_index = {q.id: i for i, q in enumerate(self.dataset.questions)}
+        self._answer_index = {a: i for i, a in enumerate(self.dataset.answers)}
+        self._rng = np.random.default_rng(seed)
+        self.world: BinWorld | None = None
+        self.question = None
+        self._make_specs()
+
+    # ------------------------------------------------------------------------------------ specs
+    def _make_specs(self) -> None:
+        h = w = self.camera.height
+        k = MAX_OBJECTS
+        f32, i64 = torch.float32, torch.int64
+        info = Composite(
+            object_pos=Unbounded(shape=(k, 3), dtype=f32),
+            visible_area=Unbounded(shape=(k,), dtype=f32),
+            full_area=Unbounded(shape=(k,), dtype=f32),
+            overlap=Bounded(0.0, 1.0, shape=(k,), dtype=f32),
+            object_mask=Binary(n=k, shape=(k,), dtype=torch.bool),
+            target_mask=Binary(n=k, shape=(k,), dtype=torch.bool),
+            is_stop=Categorical(2, shape=(1,), dtype=torch.bool),
+            push_start=Unbounded(shape=(3,), dtype=f32),
+            push_end=Unbounded(shape=(3,), dtype=f32),
+            question_index=Bounded(0, len(self.dataset.questions) - 1, shape=(1,), dtype=i64),
+            answer=Categorical(len(self.dataset.answers), shape=(1,), dtype=i64),
+            push_count=Bounded(0, self.max_pushes, shape=(1,), dtype=i64),
+        )
+        self.observation_spec = Composite(
+            rgb=Bounded(0, 255, shape=(3, h, w), dtype=torch.uint8),
+            depth=Unbounded(shape=(1, h, w), dtype=f32),
+            question=Categorical(len(self.dataset.vocab), shape=(self.question_length,), dtype=i64),
+            info=info,
+        )
+        self.action_spec = Categorical(actions.NUM_ACTIONS, shape=(), dtype=i64)
+        self.reward_spec = Unbounded(shape=(1,), dtype=f32)
+        self.done_spec = Composite(
+            done=Categorical(2, shape=(1,), dtype=torch.bool),
+            terminated=Categorical(2, shape=(1,), dtype=torch.bool),
+            truncated=Categorical(2, shape=(1,), dtype=torch.bool),
+        )
+
+    # ------------------------------------------------------------------------------------ reset
+    def _pick_question(self, tensordict, question_id):
+        if question_id is not None:
+            if question_id not in self._question_index:
+                raise ValueError(f"unknown question id {question_id!r}; ids look like {self.questions[0].id!r} "
+                                 f"(see env.questions or MQADataset.questions)")
+            return self.dataset.question(question_id)
+        if tensordict is not None and RESET_QUESTION in tensordict.keys():
+            idx = int(tensordict.get(RESET_QUESTION).reshape(-1)[0])
+            if idx >= 0:
+                if idx >= len(self.dataset.questions):
+                    raise ValueError(f"{RESET_QUESTION}={idx} outside [0, {len(self.dataset.questions)})")
+                return self.dataset.questions[idx]
+        return self.questions[int(self._rng.integers(len(self.questions)))]
+
+    def _reset(self, tensordict: TensorDictBase | None = None, question_id: str | None = None, **kwargs) -> TensorDictBase:
+        question = self._pick_question(tensordict, question_id)
+        scene = self.dataset.scene(question.scene_id)
+        assets = self.dataset.assets(scene)
+        self.world = build_world(assets, scene.poses, bin_spec=self.dataset.bin, camera=self.camera)
+        self.pusher.attach(self.world)
+        self.question = question
+        self._projector = SilhouetteProjector([list(a.collision_parts) for a in assets], self.camera)
+        self._target = np.array([a.class_name in question.classes for a in assets])
+        self._push_count = 0
+        tokens = torch.zeros(self.question_length, dtype=torch.int64)
+        tokens[: len(question.tokens)] = torch.tensor(question.tokens)
+        self._tokens = tokens
+        obs = self._observe(None)
+        self._last = obs
+        return obs
+
+    # ------------------------------------------------------------------------------------ step
+    def _validate_action(self, tensordict: TensorDictBase) -> int:
+        a = tensordict.get(keys.ACTION, None)
+        allowed = f"an integer index in [0, {actions.NUM_ACTIONS}) (pushes 0…{actions.STOP - 1}, stop {actions.STOP})"
+        if not isinstance(a, torch.Tensor) or a.numel() != 1:
+            raise ValueError(f"action must be a single {allowed}; got {a!r}")
+        if a.dtype.is_floating_point or a.dtype.is_complex or a.dtype == torch.bool:
+            raise ValueError(f"action must be {allowed}; got dtype {a.dtype} ({a.item()})")
+        value = int(a.item())
+        if not 0 <= value < actions.NUM_ACTIONS:
+            raise ValueError(f"action {value} out of range: must be {allowed}")
+        if self.world is None:
+            raise RuntimeError("call reset() before step()")
+        return value
+
+    def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
+        action = self._validate_action(tensordict)
+        if action == actions.STOP:
+            out = self._last.clone()
+            out[keys.IS_STOP] = torch.ones(1, dtype=torch.bool)
+            out[keys.PUSH_START] = torch.zeros(3)
+            out[keys.PUSH_END] = torch.zeros(3)
+            terminated = True
+        else:
+            result = self._execute_push(action)
+            self._push_count += 1
+            out = self._observe(result)
+            terminated = False
+        truncated = (not terminated) and self._push_count >= self.max_pushes
+        self._last = out
+        out = out.clone(False)
+        out.set("reward", torch.zeros(1))
+        out.set("terminated", torch.tensor([terminated]))
+        out.set("truncated", torch.tensor([truncated]))
+        out.set("done", torch.tensor([terminated or truncated]))
+        return out
+
+    def _execute_push(self, action: int) -> PushResult:
+        d, row, col = actions.decode(action)
+        uv = actions.cell_centre_uv(row, col, self.camera.height, self.camera.width)
+        depth = self._depth[min(int(uv[1]), self.camera.height - 1), min(int(uv[0]), self.camera.width - 1)]
+        if depth <= 0:                    # nothing hit: use the floor
+            depth = self.camera.distance
+        start = self.camera.unproject(uv, np.float64(depth))
+        result = self.pusher.push(self.world, start, actions.direction_xy(d), self.push_length)
+        self.world.settle(self.settle_steps, check_every=8, speed_tol=self.settle_speed)
+        return result
+
+    # ------------------------------------------------------------------------------------ measure
+    def measure(self) -> dict[str, np.ndarray]:
+        """Render and measure the current scene (numpy): the images and per-object areas."""
+        rgb, depth, seg = self.world.render()
+        poses = self.world.poses()
+        ids = self.world.entity_ids()
+        visible = np.bincount(seg.ravel(), minlength=int(ids.max()) + 1)[ids].astype(np.float32)
+        full = self._projector.areas(poses).astype(np.float32)
+        overlap = np.where(full > 0, 1.0 - visible / np.maximum(full, 1.0), 1.0).clip(0.0, 1.0).astype(np.float32)
+        return {"rgb": rgb, "depth": depth, "seg": seg, "poses": poses, "visible": visible, "full": full, "overlap": overlap}
+
+    def _observe(self, push: PushResult | None) -> TensorDict:
+        m = self.measure()
+        self._depth = m["depth"]
+        n, k = len(m["poses"]), MAX_OBJECTS
+
+        def pad(x, dtype):
+            out = torch.zeros((k, *x.shape[1:]), dtype=dtype)
+            out[:n] = torch.as_tensor(x, dtype=dtype)
+            return out
+
+        info = {
+            "object_pos": pad(m["poses"][:, :3], torch.float32),
+            "visible_area": pad(m["visible"], torch.float32),
+            "full_area": pad(m["full"], torch.float32),
+            "overlap": pad(m["overlap"], torch.float32),
+            "object_mask": pad(np.ones(n, bool), torch.bool),
+            "target_mask": pad(self._target, torch.bool),
+            "is_stop": torch.zeros(1, dtype=torch.bool),
+            "push_start": torch.as_tensor(push.start if push else np.zeros(3), dtype=torch.float32),
+            "push_end": torch.as_tensor(push.end if push else np.zeros(3), dtype=torch.float32),
+            "question_index": torch.tensor([self._question_index[self.question.id]]),
+            "answer": torch.tensor([self._answer_index[self.question.answer]]),
+            "push_count": torch.tensor([self._push_count]),
+        }
+        return TensorDict(
+            {
+                keys.RGB: torch.from_numpy(np.ascontiguousarray(m["rgb"].transpose(2, 0, 1))),
+                keys.DEPTH: torch.from_numpy(m["depth"][None].copy()),
+                keys.QUESTION: self._tokens.clone(),
+                keys.INFO: info,
+            },
+            batch_size=[],
+        )
+
+    def _set_seed(self, seed: int | None) -> None:
+        self._rng = np.random.default_rng(seed)

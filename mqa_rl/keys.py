@@ -1,0 +1,27 @@
+"""Every tensordict key of mqa_rl, defined once. Import these instead of spelling strings.
+
+The environment measures (observations and ``info``); reward transforms read ``info`` at the root
+(state before a push) and under ``"next"`` (state after it).
+"""
+
+# observations
+RGB = "rgb"                                   # uint8 [3, H, W]
+DEPTH = "depth"                               # float32 [1, H, W], metres along the view axis
+QUESTION = "question"                         # int64 [L], question tokens, 0-padded
+ACTION = "action"                             # int64 [], push index or STOP
+REWARD = "reward"
+
+# measurements of the scene (padded to MAX_OBJECTS, see OBJECT_MASK)
+INFO = "info"
+OBJECT_POS = (INFO, "object_pos")             # float32 [K, 3] world positions (bounding-box centres)
+VISIBLE_AREA = (INFO, "visible_area")         # float32 [K] A_s: pixels of the object in the segmentation
+FULL_AREA = (INFO, "full_area")               # float32 [K] A_t: pixels of its complete silhouette
+OVERLAP = (INFO, "overlap")                   # float32 [K] χ = 1 − A_s / A_t (1 when A_t = 0)
+OBJECT_MASK = (INFO, "object_mask")           # bool [K] which slots hold an object
+TARGET_MASK = (INFO, "target_mask")           # bool [K] objects of the question's class(es)
+IS_STOP = (INFO, "is_stop")                   # bool [1] the action that led here was stop
+PUSH_START = (INFO, "push_start")             # float32 [3] executed push start (world), 0 if none
+PUSH_END = (INFO, "push_end")                 # float32 [3] executed push end (world), 0 if none
+QUESTION_INDEX = (INFO, "question_index")     # int64 [1] index into MQADataset.questions
+ANSWER = (INFO, "answer")                     # int64 [1] index into MQADataset.answers (oracle)
+PUSH_COUNT = (INFO, "push_count")             # int64 [1] pushes so far in the episode
