@@ -25,3 +25,12 @@ PUSH_END = (INFO, "push_end")                 # float32 [3] executed push end (w
 QUESTION_INDEX = (INFO, "question_index")     # int64 [1] index into MQADataset.questions
 ANSWER = (INFO, "answer")                     # int64 [1] index into MQADataset.answers (oracle)
 PUSH_COUNT = (INFO, "push_count")             # int64 [1] pushes so far in the episode
+QUESTION_TYPE = (INFO, "question_type")       # int64 [1] index into mqa_rl.data.questions.QUESTION_TYPES
+
+# reward terms written by mqa_rl.transforms (under "next"; zeros after a reset), each float32 [1]
+REWARD_TERMS = "reward_terms"
+EXPLORATION = (REWARD_TERMS, "exploration")           # R_e
+GLOBAL_OCCLUSION = (REWARD_TERMS, "global_occlusion")  # R_g
+LOCAL_OCCLUSION = (REWARD_TERMS, "local_occlusion")    # R_l
+SIMPLE_SCENE = (REWARD_TERMS, "simple_scene")          # 1.0 when the scene before the action was simple
+BETA = (REWARD_TERMS, "beta")                          # β used for this step

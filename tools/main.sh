@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
-# The main job: set up the machine if needed, then run the pipeline (for now: make the default
-# dataset unless it is there, and print its summary). Extra arguments go to the dataset recipe.
+# The main job: set up the machine if needed, then run the pipeline:
+#   1. make the default dataset unless a valid one is there, and print its summary;
+#   2. run two random-policy episodes on it and write their videos next to a printed log.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 . tools/bootstrap.sh
-python recipes/make_dataset.py "$@"
+python recipes/make_dataset.py
+python recipes/random_episodes.py

@@ -33,11 +33,13 @@ from torchrl.envs import EnvBase
 
 from mqa_rl import keys
 from mqa_rl.data.dataset import MQADataset
+from mqa_rl.data.questions import QUESTION_TYPES
 from mqa_rl.envs import actions
 from mqa_rl.sim.geometry import CameraSpec
 from mqa_rl.sim.pusher import FingerPusher, Pusher, PushResult
 from mqa_rl.sim.scene import BinWorld, build_world
 from mqa_rl.sim.silhouette import SilhouetteProjector
+from mqa_rl.transforms.functional import overlap_rate
 
 MAX_OBJECTS = 50
 RESET_QUESTION = "reset_question"     # optional int64 [1] in a reset tensordict: a question index
@@ -102,6 +104,7 @@ class SapienBinEnv(EnvBase):
             question_index=Bounded(0, len(self.dataset.questions) - 1, shape=(1,), dtype=i64),
             answer=Categorical(len(self.dataset.answers), shape=(1,), dtype=i64),
             push_count=Bounded(0, self.max_pushes, shape=(1,), dtype=i64),
+            question_type=Categorical(len(QUESTION_TYPES), shape=(1,), dtype=i64),
         )
         self.observation_spec = Composite(
             rgb=Bounded(0, 255, shape=(3, h, w), dtype=torch.uint8),
@@ -205,7 +208,7 @@ class SapienBinEnv(EnvBase):
         ids = self.world.entity_ids()
         visible = np.bincount(seg.ravel(), minlength=int(ids.max()) + 1)[ids].astype(np.float32)
         full = self._projector.areas(poses).astype(np.float32)
-        overlap = np.where(full > 0, 1.0 - visible / np.maximum(full, 1.0), 1.0).clip(0.0, 1.0).astype(np.float32)
+        overlap = overlap_rate(torch.from_numpy(visible), torch.from_numpy(full)).numpy()
         return {"rgb": rgb, "depth": depth, "seg": seg, "poses": poses, "visible": visible, "full": full, "overlap": overlap}
 
     def _observe(self, push: PushResult | None) -> TensorDict:
@@ -231,6 +234,7 @@ class SapienBinEnv(EnvBase):
             "question_index": torch.tensor([self._question_index[self.question.id]]),
             "answer": torch.tensor([self._answer_index[self.question.answer]]),
             "push_count": torch.tensor([self._push_count]),
+            "question_type": torch.tensor([QUESTION_TYPES.index(self.question.type)]),
         }
         return TensorDict(
             {

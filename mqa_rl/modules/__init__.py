@@ -1,0 +1,1 @@
+"""Policies and networks (TorchRL modules)."""

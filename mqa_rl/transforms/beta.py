@@ -1,0 +1,50 @@
+"""β annealing: the weight of exploration against question-driven reward, decaying with training."""
+
+from __future__ import annotations
+
+import torch
+
+from mqa_rl import keys
+from mqa_rl.transforms.base import RewardTerm
+from mqa_rl.transforms.functional import beta_schedule
+
+
+class BetaSchedule(RewardTerm):
+    """Writes β = 1 − 0.5 · S_n / T (then 0.5) for every step; S_n is the DQN training-step count.
+
+    ``counter`` is the int64 scalar holding S_n. The training loop advances it (``set_train_steps``).
+    To reach env copies in collector worker processes, create it once with
+    ``torch.zeros((), dtype=torch.int64).share_memory_()`` and hand the same tensor to every env
+    factory through the collector's ``create_env_kwargs`` (a closure or ``functools.partial`` is
+    pickled by value: the workers would get a frozen copy). It is a buffer, so it is saved in the
+    transform's ``state_dict`` and a resumed run continues the schedule (loading copies in place and
+    keeps the sharing).
+    """
+
+    out_key = keys.BETA
+
+    def __init__(self, horizon: int, counter: torch.Tensor | None = None):
+        super().__init__()
+        if horizon <= 0:
+            raise ValueError(f"the β horizon T (half the replay memory) must be positive, got {horizon}")
+        if counter is None:
+            counter = torch.zeros((), dtype=torch.int64)
+        if counter.dtype != torch.int64 or counter.numel() != 1:
+            raise ValueError(f"the step counter must be an int64 scalar tensor, got {counter.dtype} {tuple(counter.shape)}")
+        self.horizon = int(horizon)
+        self.register_buffer("train_steps", counter)
+
+    def set_train_steps(self, steps: int) -> None:
+        self.train_steps.fill_(int(steps))
+
+    @property
+    def beta(self) -> float:
+        return float(beta_schedule(self.train_steps, self.horizon))
+
+    def compute(self, before, after) -> torch.Tensor:
+        beta = beta_schedule(self.train_steps, self.horizon).to(after.device)
+        return beta.expand(*after.batch_size, 1)
+
+    def _reset(self, tensordict, tensordict_reset):
+        tensordict_reset.set(self.out_key, self.compute(None, tensordict_reset))
+        return tensordict_reset

@@ -1,0 +1,84 @@
+"""Build a reward stack from a config (a dict or an omegaconf node), as the recipes do.
+
+Config keys (see ``recipes/conf/reward/*.yaml``)::
+
+    terms:             {name: {constructor kwargs}}   e.g. local_occlusion: {reduce: max}
+    question_weights:  {name: weight}                 R_q = Σ weight · term
+    simple_threshold:  0.2                            the simple-scene overlap threshold
+    beta_horizon:      2000                           T, half the replay memory
+    stop_reward / early_stop_penalty / redundant_push_reward
+
+A new term is a ``RewardTerm`` subclass registered with ``register_term(name, cls)``; it can then
+be named in ``terms`` and ``question_weights`` without touching the library.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import torch
+from torchrl.envs import Compose
+
+from mqa_rl.transforms.base import RewardTerm
+from mqa_rl.transforms.beta import BetaSchedule
+from mqa_rl.transforms.exploration import ExplorationReward
+from mqa_rl.transforms.mqa_reward import MQAReward
+from mqa_rl.transforms.occlusion import GlobalOcclusionReward, LocalOcclusionReward
+from mqa_rl.transforms.simple_scene import SimpleSceneFlag
+
+REWARD_TERMS: dict[str, type[RewardTerm]] = {
+    "exploration": ExplorationReward,
+    "global_occlusion": GlobalOcclusionReward,
+    "local_occlusion": LocalOcclusionReward,
+}
+
+
+def register_term(name: str, cls: type[RewardTerm]) -> None:
+    """Make a new reward term available to configs under ``name``."""
+    if not (isinstance(cls, type) and issubclass(cls, RewardTerm)):
+        raise TypeError(f"{cls!r} is not a RewardTerm subclass")
+    REWARD_TERMS[name] = cls
+
+
+def _plain(cfg):
+    try:
+        from omegaconf import OmegaConf
+
+        if OmegaConf.is_config(cfg):
+            return OmegaConf.to_container(cfg, resolve=True)
+    except ImportError:
+        pass
+    return cfg
+
+
+def make_reward_transform(cfg: Mapping, *, push_length: float, counter: torch.Tensor | None = None) -> Compose:
+    """Terms, simple-scene flag, β and ``MQAReward`` as one ``Compose`` for ``TransformedEnv``."""
+    cfg = dict(_plain(cfg))
+    allowed = {"terms", "question_weights", "simple_threshold", "beta_horizon", "stop_reward",
+               "early_stop_penalty", "redundant_push_reward", "name", "description"}
+    unknown = set(cfg) - allowed
+    if unknown:
+        raise ValueError(f"unknown reward config keys {sorted(unknown)}; allowed: {sorted(allowed)}")
+    terms = dict(cfg.get("terms") or {})
+    terms.setdefault("exploration", {})
+    weights = dict(cfg.get("question_weights") or {})
+    missing = set(weights) - set(terms)
+    if missing:
+        raise ValueError(f"question_weights names terms {sorted(missing)} that are not in 'terms' ({sorted(terms)})")
+    transforms = []
+    for name, kwargs in terms.items():
+        if name not in REWARD_TERMS:
+            raise ValueError(f"unknown reward term {name!r}; registered: {sorted(REWARD_TERMS)}")
+        kwargs = dict(kwargs or {})
+        if REWARD_TERMS[name] is ExplorationReward:
+            kwargs.setdefault("push_length", push_length)
+        transforms.append(REWARD_TERMS[name](**kwargs))
+    transforms.append(SimpleSceneFlag(cfg.get("simple_threshold", 0.2)))
+    transforms.append(BetaSchedule(cfg.get("beta_horizon", 2000), counter))
+    transforms.append(MQAReward(
+        weights,
+        stop_reward=cfg.get("stop_reward", 1.0),
+        early_stop_penalty=cfg.get("early_stop_penalty", -1.0),
+        redundant_push_reward=cfg.get("redundant_push_reward", 0.0),
+    ))
+    return Compose(*transforms)

@@ -1,0 +1,65 @@
+"""SapienBinEnv inside TorchRL's Collector, MultiSyncCollector (2 worker processes) and ParallelEnv."""
+
+import functools
+
+import pytest
+import torch
+
+from mqa_rl import keys
+from mqa_rl.envs.sapien_bin import SapienBinEnv
+
+
+def _factory(root):
+    return functools.partial(SapienBinEnv, str(root), split=None, max_pushes=2)
+
+
+def _check(data, frames):
+    data = data.reshape(-1)
+    assert data.numel() == frames
+    for key in (keys.RGB, keys.DEPTH, keys.QUESTION, keys.OVERLAP, keys.FULL_AREA, keys.TARGET_MASK):
+        assert key in data.keys(True) and ("next", *((key,) if isinstance(key, str) else key)) in data.keys(True)
+    assert data[keys.RGB].dtype == torch.uint8 and data[keys.RGB].float().std() > 0
+    assert (data["next", keys.INFO, "object_mask"].sum(-1) >= 20).all()
+
+
+def test_collector(small_dataset_dir):
+    from torchrl.collectors import Collector
+
+    coll = Collector(_factory(small_dataset_dir), None, frames_per_batch=3, total_frames=6,
+                     auto_register_policy_transforms=False)
+    try:
+        batches = [d.clone() for d in coll]
+    finally:
+        coll.shutdown()
+    assert len(batches) == 2
+    for b in batches:
+        _check(b, 3)
+
+
+@pytest.mark.timeout(300)
+def test_multisync_collector_two_workers(small_dataset_dir):
+    from torchrl.collectors import MultiSyncCollector
+
+    coll = MultiSyncCollector([_factory(small_dataset_dir)] * 2, None, frames_per_batch=4, total_frames=8,
+                              auto_register_policy_transforms=False)
+    try:
+        batches = [d.clone() for d in coll]
+    finally:
+        coll.shutdown()
+    assert len(batches) == 2
+    for b in batches:
+        _check(b, 4)
+
+
+@pytest.mark.timeout(300)
+def test_parallel_env(small_dataset_dir):
+    from torchrl.envs import ParallelEnv
+
+    env = ParallelEnv(2, _factory(small_dataset_dir))
+    try:
+        env.set_seed(0)
+        r = env.rollout(3, break_when_any_done=False)
+    finally:
+        env.close()
+    assert r.batch_size == torch.Size([2, 3])
+    _check(r, 6)
