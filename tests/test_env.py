@@ -218,3 +218,25 @@ def test_bad_construction_and_reset_arguments(small_dataset, sparse_dataset, tmp
         SapienBinEnv(sparse_dataset, split="test")          # its single scene is in train
     with pytest.raises(ValueError, match="reset_question"):
         env.reset(env.reset().empty().set("reset_question", torch.tensor([10**9])))
+
+
+def test_episode_video_mp4_and_gif(env, tmp_path):
+    import cv2
+
+    from mqa_rl.envs.video import episode_frames, write_video
+    from mqa_rl.modules.random_policy import RandomMQAPolicy
+
+    r = env.rollout(4, RandomMQAPolicy(3, seed=2))
+    frames = episode_frames(r, env.camera, env.question.text)
+    assert len(frames) == r.shape[0] + 1
+    for suffix in ("mp4", "gif"):
+        path = write_video(frames, tmp_path / f"ep.{suffix}")
+        cap = cv2.VideoCapture(str(path))
+        assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == len(frames)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ep.gif", "ep.mp4"]       # no temp files left
+    with pytest.raises(ValueError, match="mp4 or .gif"):
+        write_video(frames, tmp_path / "ep.avi")
+    # the arrow is drawn where the push went: the frame differs from the raw image
+    if not r["next", keys.IS_STOP][0].item():
+        raw = cv2.resize(r[keys.RGB][0].numpy().transpose(1, 2, 0), None, fx=2, fy=2, interpolation=cv2.INTER_NEAREST)
+        assert (frames[0][-raw.shape[0]:] != raw).any()

@@ -22,33 +22,25 @@ def _check(data, frames):
     assert (data["next", keys.INFO, "object_mask"].sum(-1) >= 20).all()
 
 
-def test_collector(small_dataset_dir):
-    from torchrl.collectors import Collector
-
-    coll = Collector(_factory(small_dataset_dir), None, frames_per_batch=3, total_frames=6,
-                     auto_register_policy_transforms=False)
-    try:
-        batches = [d.clone() for d in coll]
-    finally:
-        coll.shutdown()
-    assert len(batches) == 2
-    for b in batches:
-        _check(b, 3)
-
-
 @pytest.mark.timeout(300)
-def test_multisync_collector_two_workers(small_dataset_dir):
-    from torchrl.collectors import MultiSyncCollector
+@pytest.mark.parametrize("workers", [1, 2])
+def test_collectors(small_dataset_dir, workers):
+    """One worker: TorchRL's Collector in this process; two: MultiSyncCollector with worker processes."""
+    from torchrl.collectors import Collector, MultiSyncCollector
 
-    coll = MultiSyncCollector([_factory(small_dataset_dir)] * 2, None, frames_per_batch=4, total_frames=8,
-                              auto_register_policy_transforms=False)
+    make = _factory(small_dataset_dir)
+    if workers == 1:
+        coll = Collector(make, None, frames_per_batch=3, total_frames=6, auto_register_policy_transforms=False)
+    else:
+        coll = MultiSyncCollector([make] * workers, None, frames_per_batch=4, total_frames=8,
+                                  auto_register_policy_transforms=False)
     try:
         batches = [d.clone() for d in coll]
     finally:
         coll.shutdown()
     assert len(batches) == 2
     for b in batches:
-        _check(b, 4)
+        _check(b, 3 if workers == 1 else 4)
 
 
 @pytest.mark.timeout(300)

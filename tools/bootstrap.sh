@@ -20,10 +20,14 @@ if [ ! -x "$VENV/bin/python" ]; then
     "$PY" -m venv "$VENV"
 fi
 if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
-    log "installing pinned packages (first run: several GB, a few minutes)"
-    "$VENV/bin/python" -m pip install -q --upgrade pip
-    "$VENV/bin/python" -m pip install -q -r "$LOCK"
-    "$VENV/bin/python" -m pip install -q --no-deps -e "$ROOT"
+    log "installing pinned packages (first run: several GB, a few minutes; log: $VENV/pip-install.log)"
+    if ! { "$VENV/bin/python" -m pip install --upgrade pip \
+           && "$VENV/bin/python" -m pip install -r "$LOCK" \
+           && "$VENV/bin/python" -m pip install --no-deps -e "$ROOT"; } > "$VENV/pip-install.log" 2>&1; then
+        tail -n 30 "$VENV/pip-install.log" >&2
+        log "ERROR: package installation failed (full log: $VENV/pip-install.log)"
+        exit 1
+    fi
     echo "$want" > "$stamp"
 else
     log "virtualenv up to date"

@@ -131,7 +131,7 @@ def generate_dataset(
     if progress:
         from tqdm import tqdm
 
-        iterator = tqdm(iterator, desc="settling scenes", unit="scene")
+        iterator = tqdm(iterator, desc="settling scenes", unit="scene", disable=None)   # None: only on a terminal
     scenes, raw_questions, attempts = [], [], []
     for j in iterator:
         level, _ = plan[j]
