@@ -58,7 +58,7 @@ def test_reset_to_same_question_gives_identical_frames(env, small_dataset):
     assert env.question.id == qid
     assert torch.equal(a[keys.RGB], b[keys.RGB]) and torch.equal(a[keys.DEPTH], b[keys.DEPTH])
     idx = small_dataset.questions.index(small_dataset.question(qid))
-    c = env.reset(env.reset().empty().set("reset_question", torch.tensor([idx])))
+    c = env.reset(env.reset().empty().set(keys.RESET_QUESTION, torch.tensor([idx])))
     assert torch.equal(a[keys.RGB], c[keys.RGB])
 
 
@@ -217,7 +217,7 @@ def test_bad_construction_and_reset_arguments(small_dataset, sparse_dataset, tmp
     with pytest.raises(ValueError, match="no question"):
         SapienBinEnv(sparse_dataset, split="test")          # its single scene is in train
     with pytest.raises(ValueError, match="reset_question"):
-        env.reset(env.reset().empty().set("reset_question", torch.tensor([10**9])))
+        env.reset(env.reset().empty().set(keys.RESET_QUESTION, torch.tensor([10**9])))
 
 
 def test_episode_video_mp4_and_gif(env, tmp_path):

@@ -61,6 +61,9 @@ def test_degenerate_cases_are_zero_not_nan():
     assert global_occlusion_reward(visible, chi1, tgt).item() == 0.0  # χ_a = 0: nothing to reveal
     assert local_occlusion_reward(visible, chi1, tgt).item() == 0.0
     assert local_occlusion_reward(visible, chi1, tgt, "min").item() == 0.0
+    tiny = T([1e-45, 0.3])                                             # subnormal χ: no inf (found by hypothesis)
+    assert global_occlusion_reward(tiny, chi1, tgt).item() == 0.0
+    assert local_occlusion_reward(tiny, chi1, tgt).item() == 0.0
 
 
 def test_batch_dims():

@@ -42,7 +42,6 @@ from mqa_rl.sim.silhouette import SilhouetteProjector
 from mqa_rl.transforms.functional import overlap_rate
 
 MAX_OBJECTS = 50
-RESET_QUESTION = "reset_question"     # optional int64 [1] in a reset tensordict: a question index
 
 
 class SapienBinEnv(EnvBase):
@@ -127,11 +126,11 @@ class SapienBinEnv(EnvBase):
                 raise ValueError(f"unknown question id {question_id!r}; ids look like {self.questions[0].id!r} "
                                  f"(see env.questions or MQADataset.questions)")
             return self.dataset.question(question_id)
-        if tensordict is not None and RESET_QUESTION in tensordict.keys():
-            idx = int(tensordict.get(RESET_QUESTION).reshape(-1)[0])
+        if tensordict is not None and keys.RESET_QUESTION in tensordict.keys():
+            idx = int(tensordict.get(keys.RESET_QUESTION).reshape(-1)[0])
             if idx >= 0:
                 if idx >= len(self.dataset.questions):
-                    raise ValueError(f"{RESET_QUESTION}={idx} outside [0, {len(self.dataset.questions)})")
+                    raise ValueError(f"{keys.RESET_QUESTION}={idx} outside [0, {len(self.dataset.questions)})")
                 return self.dataset.questions[idx]
         return self.questions[int(self._rng.integers(len(self.questions)))]
 

@@ -15,7 +15,8 @@ _EXPORTS = {
     "BetaSchedule": "beta",
     "MQAReward": "mqa_reward",
     "make_reward_transform": "factory",
-    "REWARD_TERMS": "factory",
+    "register_term": "factory",
+    "TERM_REGISTRY": "factory",
 }
 __all__ = list(_EXPORTS)
 

@@ -26,7 +26,7 @@ from mqa_rl.transforms.mqa_reward import MQAReward
 from mqa_rl.transforms.occlusion import GlobalOcclusionReward, LocalOcclusionReward
 from mqa_rl.transforms.simple_scene import SimpleSceneFlag
 
-REWARD_TERMS: dict[str, type[RewardTerm]] = {
+TERM_REGISTRY: dict[str, type[RewardTerm]] = {
     "exploration": ExplorationReward,
     "global_occlusion": GlobalOcclusionReward,
     "local_occlusion": LocalOcclusionReward,
@@ -37,7 +37,7 @@ def register_term(name: str, cls: type[RewardTerm]) -> None:
     """Make a new reward term available to configs under ``name``."""
     if not (isinstance(cls, type) and issubclass(cls, RewardTerm)):
         raise TypeError(f"{cls!r} is not a RewardTerm subclass")
-    REWARD_TERMS[name] = cls
+    TERM_REGISTRY[name] = cls
 
 
 def _plain(cfg):
@@ -67,12 +67,12 @@ def make_reward_transform(cfg: Mapping, *, push_length: float, counter: torch.Te
         raise ValueError(f"question_weights names terms {sorted(missing)} that are not in 'terms' ({sorted(terms)})")
     transforms = []
     for name, kwargs in terms.items():
-        if name not in REWARD_TERMS:
-            raise ValueError(f"unknown reward term {name!r}; registered: {sorted(REWARD_TERMS)}")
+        if name not in TERM_REGISTRY:
+            raise ValueError(f"unknown reward term {name!r}; registered: {sorted(TERM_REGISTRY)}")
         kwargs = dict(kwargs or {})
-        if REWARD_TERMS[name] is ExplorationReward:
+        if TERM_REGISTRY[name] is ExplorationReward:
             kwargs.setdefault("push_length", push_length)
-        transforms.append(REWARD_TERMS[name](**kwargs))
+        transforms.append(TERM_REGISTRY[name](**kwargs))
     transforms.append(SimpleSceneFlag(cfg.get("simple_threshold", 0.2)))
     transforms.append(BetaSchedule(cfg.get("beta_horizon", 2000), counter))
     transforms.append(MQAReward(

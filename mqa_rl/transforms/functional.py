@@ -10,6 +10,7 @@ from __future__ import annotations
 import torch
 
 EXPLORATION_CAP = 4.0     # the authors' code ignored displacement ratios ≥ 4 (teleport glitches)
+NOTHING_TO_REVEAL = 1e-6  # overlap below this counts as 0 (a real χ is 0 or ≥ 1 / A_t ≈ 2e-5); keeps ratios finite
 
 
 def overlap_rate(visible_area: torch.Tensor, full_area: torch.Tensor) -> torch.Tensor:
@@ -41,9 +42,10 @@ def exploration_reward(
 
 
 def _relative_drop(before: torch.Tensor, after: torch.Tensor) -> torch.Tensor:
-    """(before − after) / before, 0 where before == 0."""
-    safe = torch.where(before > 0, before, torch.ones_like(before))
-    return torch.where(before > 0, (before - after) / safe, torch.zeros_like(before))
+    """(before − after) / before, 0 where before is (numerically) 0."""
+    some = before > NOTHING_TO_REVEAL
+    safe = torch.where(some, before, torch.ones_like(before))
+    return torch.where(some, (before - after) / safe, torch.zeros_like(before))
 
 
 def global_occlusion_reward(chi_before: torch.Tensor, chi_after: torch.Tensor, target_mask: torch.Tensor) -> torch.Tensor:
