@@ -1,12 +1,18 @@
 """SapienBinEnv inside TorchRL's Collector, MultiSyncCollector (2 worker processes) and ParallelEnv."""
 
 import functools
+from pathlib import Path
 
 import pytest
 import torch
+import yaml
 
 from mqa_rl import keys
 from mqa_rl.envs.sapien_bin import SapienBinEnv
+from mqa_rl.transforms import make_reward_transform
+from mqa_rl.transforms.functional import exploration_reward, global_occlusion_reward, local_occlusion_reward
+
+CONF = Path(__file__).parents[1] / "recipes" / "conf" / "reward"
 
 
 def _factory(root):
@@ -44,10 +50,13 @@ def test_collectors(small_dataset_dir, workers):
 
 
 @pytest.mark.timeout(300)
-def test_parallel_env(small_dataset_dir):
-    from torchrl.envs import ParallelEnv
+def test_parallel_env_with_batched_reward_stack(small_dataset_dir, small_dataset):
+    """ParallelEnv (batch [2]) keeps every key; the reward stack on top of it applies the formulas per env."""
+    from torchrl.envs import ParallelEnv, TransformedEnv
 
-    env = ParallelEnv(2, _factory(small_dataset_dir))
+    push_length = SapienBinEnv(small_dataset, split=None).push_length
+    cfg = yaml.safe_load((CONF / "global_local.yaml").read_text())
+    env = TransformedEnv(ParallelEnv(2, _factory(small_dataset_dir)), make_reward_transform(cfg, push_length=push_length))
     try:
         env.set_seed(0)
         r = env.rollout(3, break_when_any_done=False)
@@ -55,3 +64,10 @@ def test_parallel_env(small_dataset_dir):
         env.close()
     assert r.batch_size == torch.Size([2, 3])
     _check(r, 6)
+    nxt = r["next"]
+    torch.testing.assert_close(nxt[keys.EXPLORATION].squeeze(-1), exploration_reward(
+        r[keys.OBJECT_POS], nxt[keys.OBJECT_POS], r[keys.OBJECT_MASK], push_length))
+    torch.testing.assert_close(nxt[keys.GLOBAL_OCCLUSION].squeeze(-1), global_occlusion_reward(
+        r[keys.OVERLAP], nxt[keys.OVERLAP], r[keys.TARGET_MASK]))
+    torch.testing.assert_close(nxt[keys.LOCAL_OCCLUSION].squeeze(-1), local_occlusion_reward(
+        r[keys.OVERLAP], nxt[keys.OVERLAP], r[keys.TARGET_MASK]))

@@ -182,7 +182,7 @@ class SapienBinEnv(EnvBase):
         truncated = (not terminated) and self._push_count >= self.max_pushes
         self._last = out
         out = out.clone(False)
-        out.set("reward", torch.zeros(1))
+        out.set(keys.REWARD, torch.zeros(1))
         out.set("terminated", torch.tensor([terminated]))
         out.set("truncated", torch.tensor([truncated]))
         out.set("done", torch.tensor([terminated or truncated]))

@@ -7,7 +7,7 @@ while a fresh build at the same poses is bit-identical (measured; see docs/platf
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import sapien
@@ -63,8 +63,6 @@ class BinWorld:
     bodies: list[sapien.physx.PhysxRigidDynamicComponent]
     camera: sapien.render.RenderCameraComponent | None
     bin: BinSpec
-    camera_spec: CameraSpec | None
-    static_entities: list[sapien.Entity] = field(default_factory=list)
 
     # ----------------------------------------------------------------------------- state
     def poses(self) -> np.ndarray:
@@ -182,16 +180,16 @@ def build_world(
     scene.set_timestep(TIMESTEP)
 
     h, t, wh = bin_spec.half, bin_spec.wall_thickness, bin_spec.wall_height
-    statics = [_static_box(scene, [1.0, 1.0, 0.05], [0, 0, -0.05], FLOOR_COLOR, render)]   # floor top at z = 0
+    _static_box(scene, [1.0, 1.0, 0.05], [0, 0, -0.05], FLOOR_COLOR, render)   # floor top at z = 0
     for sx, sy in ((1, 0), (-1, 0), (0, 1), (0, -1)):
         half = [t / 2, h + t, wh / 2] if sx else [h + t, t / 2, wh / 2]
-        statics.append(_static_box(scene, half, [sx * (h + t / 2), sy * (h + t / 2), wh / 2], WALL_COLOR, render))
+        _static_box(scene, half, [sx * (h + t / 2), sy * (h + t / 2), wh / 2], WALL_COLOR, render)
 
     cam = None
     if render:
         cam = scene.add_camera("top", camera.width, camera.height, np.deg2rad(camera.fovy_deg), camera.near, camera.far)
         cam.entity.pose = sapien.Pose(camera.position.astype(np.float32), camera.sapien_quaternion.astype(np.float32))
-    world = BinWorld(scene, [], [], [], cam, bin_spec, camera, statics)
+    world = BinWorld(scene, [], [], [], cam, bin_spec)
     for asset, pose in zip(assets, np.asarray(poses, dtype=np.float64)):
         add_object(world, asset, pose)
     if asleep:
