@@ -45,7 +45,16 @@ else
     . /etc/os-release
     log "no usable Vulkan device: installing Mesa lavapipe from ${VERSION_CODENAME}-backports"
     if [ "${VERSION_CODENAME:-}" = bookworm ]; then
-        echo "deb http://deb.debian.org/debian bookworm-backports main" > /etc/apt/sources.list.d/mqa-backports.list
+        # backports from the Debian mirror this machine already uses (never a fixed host)
+        . "$ROOT/tools/debian_mirror.sh"
+        if ! uri=$(debian_main_uri); then
+            log "ERROR: no Debian 'bookworm ... main' entry found in /etc/apt/sources.list or /etc/apt/sources.list.d/."
+            log "Add your mirror's line to /etc/apt/sources.list, e.g.:  deb <your Debian mirror URI> bookworm main"
+            log "then run this script again."
+            exit 1
+        fi
+        log "bookworm-backports from $uri"
+        echo "deb $uri bookworm-backports main" > /etc/apt/sources.list.d/mqa-backports.list
         apt-get update -qq
         DEBIAN_FRONTEND=noninteractive apt-get install -y -qq -t bookworm-backports mesa-vulkan-drivers libvulkan1 >/dev/null
     else
