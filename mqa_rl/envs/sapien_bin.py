@@ -6,7 +6,7 @@ Task sheet
   poses at every reset (bit-identical physics; an in-place restore is not).
 * **Question**: sampled from the chosen split / difficulty levels / question types, or fixed with
   ``env.reset(question_id="scene_003/counting/can")`` (or a ``"reset_question"`` index into
-  ``MQADataset.questions`` in the reset tensordict, for batched and remote envs).
+  ``MQADataset.questions`` in the reset tensordict, for batched and remote envs; negative: random).
 * **Observation**: ``rgb`` uint8 [3, H, W], ``depth`` float32 [1, H, W] (metres), ``question`` int64
   tokens [L], and ``info`` measurements (see ``mqa_rl.keys``): object positions, visible area A_s,
   full projected area A_t, overlap χ, target mask, stop flag, executed push.
@@ -15,7 +15,8 @@ Task sheet
   travels a quarter of the image width measured on the bin floor, then the finger lifts away and
   the scene settles (until every body sleeps or moves slower than ``settle_speed``, at most
   ``settle_steps``).
-* **Episode end**: stop → ``terminated``; ``max_pushes`` pushes → ``truncated``.
+* **Episode end**: stop → ``terminated``; ``max_pushes`` pushes → ``truncated``. A ``step`` after that
+  raises ``RuntimeError`` until ``reset()`` (TorchRL's rollouts and collectors reset on done).
 * **Reward**: always 0 here. The env measures; ``mqa_rl.transforms`` turn measurements into reward.
 
 >>> env = SapienBinEnv("data/mqa", split="train", question_types=["counting"])   # doctest: +SKIP
@@ -83,6 +84,7 @@ class SapienBinEnv(EnvBase):
         self._rng = np.random.default_rng(seed)
         self.world: BinWorld | None = None
         self.question = None
+        self._done = False
         self._make_specs()
 
     # ------------------------------------------------------------------------------------ specs
@@ -127,12 +129,23 @@ class SapienBinEnv(EnvBase):
                                  f"(see env.questions or MQADataset.questions)")
             return self.dataset.question(question_id)
         if tensordict is not None and keys.RESET_QUESTION in tensordict.keys():
-            idx = int(tensordict.get(keys.RESET_QUESTION).reshape(-1)[0])
+            idx = self._reset_index(tensordict.get(keys.RESET_QUESTION))
             if idx >= 0:
-                if idx >= len(self.dataset.questions):
-                    raise ValueError(f"{keys.RESET_QUESTION}={idx} outside [0, {len(self.dataset.questions)})")
                 return self.dataset.questions[idx]
         return self.questions[int(self._rng.integers(len(self.questions)))]
+
+    def _reset_index(self, value) -> int:
+        """The ``reset_question`` index: one integer (never a float to truncate), < the number of questions."""
+        n = len(self.dataset.questions)
+        allowed = f"one integer index into MQADataset.questions, in [0, {n}) (negative: a random question)"
+        if not isinstance(value, torch.Tensor) or value.numel() != 1:
+            raise ValueError(f"{keys.RESET_QUESTION} must be {allowed}; got {value!r}")
+        if value.dtype.is_floating_point or value.dtype.is_complex or value.dtype == torch.bool:
+            raise ValueError(f"{keys.RESET_QUESTION} must be {allowed}; got dtype {value.dtype} ({value.item()})")
+        idx = int(value.item())
+        if idx >= n:
+            raise ValueError(f"{keys.RESET_QUESTION}={idx} outside [0, {n}): must be {allowed}")
+        return idx
 
     def _reset(self, tensordict: TensorDictBase | None = None, question_id: str | None = None, **kwargs) -> TensorDictBase:
         question = self._pick_question(tensordict, question_id)
@@ -144,6 +157,7 @@ class SapienBinEnv(EnvBase):
         self._projector = SilhouetteProjector([list(a.collision_parts) for a in assets], self.camera)
         self._target = np.array([a.class_name in question.classes for a in assets])
         self._push_count = 0
+        self._done = False
         tokens = torch.zeros(self.question_length, dtype=torch.int64)
         tokens[: len(question.tokens)] = torch.tensor(question.tokens)
         self._tokens = tokens
@@ -153,17 +167,19 @@ class SapienBinEnv(EnvBase):
 
     # ------------------------------------------------------------------------------------ step
     def _validate_action(self, tensordict: TensorDictBase) -> int:
+        if self.world is None:
+            raise RuntimeError("call reset() before step()")
+        if self._done:
+            raise RuntimeError("the episode is over (it stopped or reached max_pushes): call reset() before the next step()")
         a = tensordict.get(keys.ACTION, None)
-        allowed = f"an integer index in [0, {actions.NUM_ACTIONS}) (pushes 0…{actions.STOP - 1}, stop {actions.STOP})"
+        allowed = f"one integer index in [0, {actions.NUM_ACTIONS}) (pushes 0…{actions.STOP - 1}, stop {actions.STOP})"
         if not isinstance(a, torch.Tensor) or a.numel() != 1:
-            raise ValueError(f"action must be a single {allowed}; got {a!r}")
+            raise ValueError(f"action must be {allowed}; got {a!r}")
         if a.dtype.is_floating_point or a.dtype.is_complex or a.dtype == torch.bool:
             raise ValueError(f"action must be {allowed}; got dtype {a.dtype} ({a.item()})")
         value = int(a.item())
         if not 0 <= value < actions.NUM_ACTIONS:
             raise ValueError(f"action {value} out of range: must be {allowed}")
-        if self.world is None:
-            raise RuntimeError("call reset() before step()")
         return value
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
@@ -180,6 +196,7 @@ class SapienBinEnv(EnvBase):
             out = self._observe(result)
             terminated = False
         truncated = (not terminated) and self._push_count >= self.max_pushes
+        self._done = terminated or truncated
         self._last = out
         out = out.clone(False)
         out.set(keys.REWARD, torch.zeros(1))
