@@ -45,6 +45,15 @@ from mqa_rl.transforms.functional import overlap_rate
 MAX_OBJECTS = 50
 
 
+def _one_integer(value, name: str, allowed: str) -> int:
+    """A one-element integer tensor as an int; a float (never truncated), bool or several values are refused."""
+    if not isinstance(value, torch.Tensor) or value.numel() != 1:
+        raise ValueError(f"{name} must be {allowed}; got {value!r}")
+    if value.dtype.is_floating_point or value.dtype.is_complex or value.dtype == torch.bool:
+        raise ValueError(f"{name} must be {allowed}; got dtype {value.dtype} ({value.item()})")
+    return int(value.item())
+
+
 class SapienBinEnv(EnvBase):
     """The MQA bin scene (see the module docstring for the task sheet)."""
 
@@ -138,11 +147,7 @@ class SapienBinEnv(EnvBase):
         """The ``reset_question`` index: one integer (never a float to truncate), < the number of questions."""
         n = len(self.dataset.questions)
         allowed = f"one integer index into MQADataset.questions, in [0, {n}) (negative: a random question)"
-        if not isinstance(value, torch.Tensor) or value.numel() != 1:
-            raise ValueError(f"{keys.RESET_QUESTION} must be {allowed}; got {value!r}")
-        if value.dtype.is_floating_point or value.dtype.is_complex or value.dtype == torch.bool:
-            raise ValueError(f"{keys.RESET_QUESTION} must be {allowed}; got dtype {value.dtype} ({value.item()})")
-        idx = int(value.item())
+        idx = _one_integer(value, keys.RESET_QUESTION, allowed)
         if idx >= n:
             raise ValueError(f"{keys.RESET_QUESTION}={idx} outside [0, {n}): must be {allowed}")
         return idx
@@ -171,13 +176,8 @@ class SapienBinEnv(EnvBase):
             raise RuntimeError("call reset() before step()")
         if self._done:
             raise RuntimeError("the episode is over (it stopped or reached max_pushes): call reset() before the next step()")
-        a = tensordict.get(keys.ACTION, None)
         allowed = f"one integer index in [0, {actions.NUM_ACTIONS}) (pushes 0…{actions.STOP - 1}, stop {actions.STOP})"
-        if not isinstance(a, torch.Tensor) or a.numel() != 1:
-            raise ValueError(f"action must be {allowed}; got {a!r}")
-        if a.dtype.is_floating_point or a.dtype.is_complex or a.dtype == torch.bool:
-            raise ValueError(f"action must be {allowed}; got dtype {a.dtype} ({a.item()})")
-        value = int(a.item())
+        value = _one_integer(tensordict.get(keys.ACTION, None), keys.ACTION, allowed)
         if not 0 <= value < actions.NUM_ACTIONS:
             raise ValueError(f"action {value} out of range: must be {allowed}")
         return value
