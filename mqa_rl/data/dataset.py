@@ -98,7 +98,7 @@ def generate_dataset(
     ``objects_per_scene`` overrides the paper's object counts per level (for sparser or denser
     scenes). Everything derives from ``seed``: the same seed gives the same files, byte for byte.
     """
-    from mqa_rl.data.scenes import DIFFICULTIES, settle_scene
+    from mqa_rl.data.scenes import DIFFICULTIES, drop_config, settle_scene
     from mqa_rl.data.stats import answer_statistics
     from mqa_rl.sim.silhouette import silhouettes
 
@@ -176,7 +176,7 @@ def generate_dataset(
         "generator": f"mqa_rl {mqa_rl.__version__}",
         "seed": seed,
         "config": {"num_scenes": num_scenes, "objects_per_scene": per_level, "train_fraction": train_fraction,
-                   "bin": vars(bin_spec), "camera": vars(camera)},
+                   "bin": vars(bin_spec), "camera": vars(camera), "drop": drop_config()},
         "counts": {"objects": len(assets), "classes": len(classes), "scenes": len(scenes), "questions": len(lines)},
         "drop_attempts": {"total": int(sum(attempts)), "max": int(max(attempts, default=0))},
     }

@@ -28,7 +28,7 @@ import uuid
 import warnings
 from pathlib import Path
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2    # 2: real-size objects, piled scenes, 40 × 40 × 45 cm bin, camera framing the rim
 MANIFEST = "manifest.json"
 
 

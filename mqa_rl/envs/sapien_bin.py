@@ -26,6 +26,8 @@ Task sheet
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import torch
 from tensordict import TensorDict, TensorDictBase
@@ -226,6 +228,32 @@ class SapienBinEnv(EnvBase):
         full = self._projector.areas(poses).astype(np.float32)
         overlap = overlap_rate(torch.from_numpy(visible), torch.from_numpy(full)).numpy()
         return {"rgb": rgb, "depth": depth, "seg": seg, "poses": poses, "visible": visible, "full": full, "overlap": overlap}
+
+    def ground_truth(self) -> dict:
+        """What only the simulator knows, for oracle references (never for learning): ``measure()``
+        plus every object's full silhouette mask [N, H, W], its segmentation id, the target mask and
+        the episode's question / scene ids and push count."""
+        if self.world is None:
+            raise RuntimeError("call reset() before ground_truth()")
+        m = self.measure()
+        m.update(masks=self._projector.masks(m["poses"]), entity_ids=self.world.entity_ids(), target=self._target.copy(),
+                 question_id=self.question.id, scene_id=self.question.scene_id, push_count=self._push_count)
+        return m
+
+    def preview(self, action: int) -> dict:
+        """``measure()`` of the scene after push ``action``, simulated on a copy rebuilt at the current
+        poses; the episode itself is untouched. For oracle references that plan by lookahead."""
+        if self.world is None:
+            raise RuntimeError("call reset() before preview()")
+        world, pusher = self.world, self.pusher
+        try:
+            self.world = build_world(world.assets, world.poses(), bin_spec=world.bin, camera=self.camera)
+            self.pusher = copy.copy(pusher)
+            self.pusher.attach(self.world)
+            self._execute_push(int(action))
+            return self.measure()
+        finally:
+            self.world, self.pusher = world, pusher
 
     def _observe(self, push: PushResult | None) -> TensorDict:
         m = self.measure()
