@@ -27,6 +27,10 @@ QUESTION_INDEX = (INFO, "question_index")     # int64 [1] index into MQADataset.
 ANSWER = (INFO, "answer")                     # int64 [1] index into MQADataset.answers (oracle)
 PUSH_COUNT = (INFO, "push_count")             # int64 [1] pushes so far in the episode
 QUESTION_TYPE = (INFO, "question_type")       # int64 [1] index into mqa_rl.data.questions.QUESTION_TYPES
+# how the pusher executed the last push (the finger always reaches, touches nothing else, tracks exactly)
+PUSH_UNREACHABLE = (INFO, "push_unreachable")  # bool [1] part of the push was out of the arm's reach (cut short or skipped)
+ARM_COLLISION = (INFO, "arm_collision")        # bool [1] a robot part other than the pushing tool touched something
+TIP_ERROR = (INFO, "tip_error")                # float32 [2] mean, max distance (m) of the tool tip from the push line
 
 # reward terms written by mqa_rl.transforms (under "next"; zeros after a reset), each float32 [1]
 REWARD_TERMS = "reward_terms"

@@ -12,11 +12,13 @@ Task sheet
   full projected area A_t, overlap χ, target mask, stop flag, executed push.
 * **Action**: ``Categorical(6273)``; see ``mqa_rl.envs.actions`` for the layout (8 directions × 28 ×
   28 cells, then stop). A push starts at the surface point under the cell centre (from depth),
-  travels a quarter of the image width measured on the bin floor, then the finger lifts away and
-  the scene settles (until every body sleeps or moves slower than ``settle_speed``, at most
+  travels a quarter of the image width measured on the bin floor, then the pusher leaves the
+  camera's view and the scene settles (until every body sleeps or moves slower than ``settle_speed``, at most
   ``settle_steps``).
 * **Episode end**: stop → ``terminated``; ``max_pushes`` pushes → ``truncated``. A ``step`` after that
   raises ``RuntimeError`` until ``reset()`` (TorchRL's rollouts and collectors reset on done).
+* **Pusher**: ``pusher="finger"`` (default, a force-limited capsule) or ``"arm"`` (a Panda with a
+  stick, ``mqa_rl.sim.arm_pusher``; needs ``pip install 'mqa_rl[arm]'``), or any ``Pusher`` object.
 * **Reward**: always 0 here. The env measures; ``mqa_rl.transforms`` turn measurements into reward.
 
 >>> env = SapienBinEnv("data/mqa", split="train", question_types=["counting"])   # doctest: +SKIP
@@ -40,6 +42,7 @@ from mqa_rl.data.questions import QUESTION_TYPES
 from mqa_rl.envs import actions
 from mqa_rl.sim.geometry import CameraSpec
 from mqa_rl.sim.pusher import FingerPusher, Pusher, PushResult
+from mqa_rl.sim.pushers import make_pusher
 from mqa_rl.sim.scene import BinWorld, build_world
 from mqa_rl.sim.silhouette import SilhouetteProjector
 from mqa_rl.transforms.functional import overlap_rate
@@ -56,6 +59,16 @@ def _one_integer(value, name: str, allowed: str) -> int:
     return int(value.item())
 
 
+def _execution_info(push: PushResult | None) -> dict:
+    """How the pusher executed ``push`` (``keys.PUSH_UNREACHABLE``, ``ARM_COLLISION``, ``TIP_ERROR``); all
+    zero when there was no push."""
+    return {
+        keys.PUSH_UNREACHABLE: torch.tensor([push is not None and not push.reachable]),
+        keys.ARM_COLLISION: torch.tensor([push is not None and push.arm_collision]),
+        keys.TIP_ERROR: torch.tensor([push.tip_error_mean, push.tip_error_max] if push else [0.0, 0.0], dtype=torch.float32),
+    }
+
+
 class SapienBinEnv(EnvBase):
     """The MQA bin scene (see the module docstring for the task sheet)."""
 
@@ -70,7 +83,7 @@ class SapienBinEnv(EnvBase):
         max_pushes: int = 10,
         settle_steps: int = 240,
         settle_speed: float = 0.005,
-        pusher: Pusher | None = None,
+        pusher: Pusher | str | None = None,
         seed: int | None = None,
         device="cpu",
     ):
@@ -88,7 +101,7 @@ class SapienBinEnv(EnvBase):
         self.max_pushes = max_pushes
         self.settle_steps = settle_steps
         self.settle_speed = settle_speed
-        self.pusher = pusher if pusher is not None else FingerPusher()
+        self.pusher = make_pusher(pusher) if isinstance(pusher, str) else (pusher if pusher is not None else FingerPusher())
         self.question_length = max(len(q.tokens) for q in self.dataset.questions)
         self._question_index = {q.id: i for i, q in enumerate(self.dataset.questions)}
         self._answer_index = {a: i for i, a in enumerate(self.dataset.answers)}
@@ -117,6 +130,9 @@ class SapienBinEnv(EnvBase):
             answer=Categorical(len(self.dataset.answers), shape=(1,), dtype=i64),
             push_count=Bounded(0, self.max_pushes, shape=(1,), dtype=i64),
             question_type=Categorical(len(QUESTION_TYPES), shape=(1,), dtype=i64),
+            push_unreachable=Categorical(2, shape=(1,), dtype=torch.bool),
+            arm_collision=Categorical(2, shape=(1,), dtype=torch.bool),
+            tip_error=Unbounded(shape=(2,), dtype=f32),
         )
         self.observation_spec = Composite(
             rgb=Bounded(0, 255, shape=(3, h, w), dtype=torch.uint8),
@@ -191,6 +207,7 @@ class SapienBinEnv(EnvBase):
             out[keys.IS_STOP] = torch.ones(1, dtype=torch.bool)
             out[keys.PUSH_START] = torch.zeros(3)
             out[keys.PUSH_END] = torch.zeros(3)
+            out.update(_execution_info(None))
             terminated = True
         else:
             result = self._execute_push(action)
@@ -280,6 +297,7 @@ class SapienBinEnv(EnvBase):
             "push_count": torch.tensor([self._push_count]),
             "question_type": torch.tensor([QUESTION_TYPES.index(self.question.type)]),
         }
+        info.update({k[1]: v for k, v in _execution_info(push).items()})
         return TensorDict(
             {
                 keys.RGB: torch.from_numpy(np.ascontiguousarray(m["rgb"].transpose(2, 0, 1))),

@@ -1,4 +1,4 @@
-"""The push primitive, behind a small interface so that a full arm can replace the finger later.
+"""The push primitive, behind a small interface (``Pusher``): this finger, or the arm of ``arm_pusher``.
 
 ``FingerPusher`` approximates the paper's UR5 gripper by a vertical capsule finger: a dynamic body
 held by a stiff, force-limited 6-DoF drive (a kinematic body pressed into clutter squeezes objects
@@ -17,6 +17,7 @@ from typing import Protocol
 import numpy as np
 import sapien
 
+from mqa_rl.sim.geometry import BinSpec
 from mqa_rl.sim.scene import CONTACT_OFFSET, TIMESTEP, BinWorld
 
 PARK = np.array([0.9, 0.9, 0.6])        # out of the camera's view and away from the bin
@@ -27,12 +28,30 @@ class PushResult:
     start: np.ndarray       # [3] executed start of the horizontal stroke (world)
     end: np.ndarray         # [3] executed end (where the drive target stopped)
     steps: int              # physics steps spent on the stroke (approach, press, travel, lift)
+    reachable: bool = True          # the whole push was reachable (an arm may fail to reach; the finger never does)
+    arm_collision: bool = False     # a robot part other than the pushing tool touched something
+    tip_error_mean: float = 0.0     # tool tip's distance to the commanded push line during the stroke (m)
+    tip_error_max: float = 0.0
 
 
 class Pusher(Protocol):
     def attach(self, world: BinWorld) -> None: ...
 
     def push(self, world: BinWorld, start: np.ndarray, direction: np.ndarray, length: float) -> PushResult: ...
+
+
+def clip_stroke(bin_spec: BinSpec, start: np.ndarray, direction: np.ndarray, length: float, clearance: float) -> tuple[np.ndarray, np.ndarray]:
+    """A stroke's start and end in the xy-plane, kept ``clearance`` inside the walls (a tool's radius + margin)."""
+    lim = bin_spec.half - clearance
+    s = np.clip(np.asarray(start[:2], np.float64), -lim, lim)
+    d = np.asarray(direction[:2], np.float64)
+    t = length
+    for k in range(2):
+        if d[k] > 1e-9:
+            t = min(t, (lim - s[k]) / d[k])
+        elif d[k] < -1e-9:
+            t = min(t, (-lim - s[k]) / d[k])
+    return s, s + max(t, 0.0) * d
 
 
 @dataclass
@@ -93,16 +112,7 @@ class FingerPusher:
 
     def clip_to_bin(self, world: BinWorld, start: np.ndarray, direction: np.ndarray, length: float) -> tuple[np.ndarray, np.ndarray]:
         """The stroke's start and end in the xy-plane, kept inside the walls by radius + margin."""
-        lim = world.bin.half - self.radius - self.wall_margin
-        s = np.clip(np.asarray(start[:2], np.float64), -lim, lim)
-        d = np.asarray(direction[:2], np.float64)
-        t = length
-        for k in range(2):
-            if d[k] > 1e-9:
-                t = min(t, (lim - s[k]) / d[k])
-            elif d[k] < -1e-9:
-                t = min(t, (-lim - s[k]) / d[k])
-        return s, s + max(t, 0.0) * d
+        return clip_stroke(world.bin, start, direction, length, self.radius + self.wall_margin)
 
     def push(self, world: BinWorld, start: np.ndarray, direction: np.ndarray, length: float) -> PushResult:
         s, e = self.clip_to_bin(world, start, direction, length)
