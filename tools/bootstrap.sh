@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Set up everything mqa_rl needs on a bare Debian 12 machine, idempotently:
-#   1. a virtualenv (.venv) with the pinned Python packages (requirements.lock),
+#   1. a virtualenv (.venv) with the pinned Python packages (requirements.lock), extras included
+#      (the 'arm' extra's mani_skill without its dependencies: only its robot asset files are used),
 #   2. a Vulkan device SAPIEN can render with: when none is usable, Mesa >= 24.3 lavapipe
 #      from bookworm-backports (Debian 12's own Mesa 22 is too old; see docs/platform.md).
 # A second run only checks: the venv carries a stamp of the lock file it was built from.
@@ -21,8 +22,13 @@ if [ ! -x "$VENV/bin/python" ]; then
 fi
 if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
     log "installing pinned packages (first run: several GB, a few minutes; log: $VENV/pip-install.log)"
+    # Lines of the lock marked "# no-deps" are installed without their dependencies: of mani_skill
+    # (the arm's robot assets, the 'arm' extra) only the asset files are used, not its heavy stack.
+    grep -v -- '# no-deps' "$LOCK" > "$VENV/requirements.core.txt"
+    grep -- '# no-deps' "$LOCK" | sed 's/#.*//' > "$VENV/requirements.no-deps.txt"
     if ! { "$VENV/bin/python" -m pip install --upgrade pip \
-           && "$VENV/bin/python" -m pip install -r "$LOCK" \
+           && "$VENV/bin/python" -m pip install -r "$VENV/requirements.core.txt" \
+           && "$VENV/bin/python" -m pip install --no-deps -r "$VENV/requirements.no-deps.txt" \
            && "$VENV/bin/python" -m pip install --no-deps -e "$ROOT"; } > "$VENV/pip-install.log" 2>&1; then
         tail -n 30 "$VENV/pip-install.log" >&2
         log "ERROR: package installation failed (full log: $VENV/pip-install.log)"

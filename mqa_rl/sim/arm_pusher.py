@@ -29,11 +29,24 @@ HOME_TIP = np.array([-0.45, -0.30, 0.50])  # out of the camera's view at any hei
 MAX_JOINT_STEP = 0.05                      # rad per physics step (12 rad/s): a larger jump is an IK branch flip
 
 
+@dataclass
 class ArmPlan:
-    """Joint targets [T, 7] for consecutive tip waypoints, and which of those waypoints the IK reached."""
+    """Joint targets [T, 7] for the first ``reached`` of consecutive tip waypoints (IK reached them)."""
 
-    def __init__(self, qpos: np.ndarray, reached: int):
-        self.qpos, self.reached = qpos, reached
+    qpos: np.ndarray
+    reached: int
+
+
+@dataclass
+class PushPlan:
+    """One push in joint targets (one row per physics step); ``approach`` is None when the start is out of reach."""
+
+    start: np.ndarray                 # tip at the start of the stroke (world)
+    line_end: np.ndarray              # commanded end of the stroke, cut where it became unreachable
+    approach: np.ndarray | None       # home → over the start → down to the start
+    stroke: np.ndarray | None         # along the push line
+    back: np.ndarray | None           # up and home
+    reachable: bool
 
 
 @dataclass
@@ -166,46 +179,52 @@ class ArmPusher:
                     return True
         return False
 
-    def push(self, world: BinWorld, start: np.ndarray, direction: np.ndarray, length: float) -> PushResult:
-        s, e = clip_stroke(world.bin, start, direction, length, self.radius + self.wall_margin)
+    def plan_push(self, bin_spec, start: np.ndarray, direction: np.ndarray, length: float) -> PushPlan:
+        """Joint targets for one push (no physics): approach, stroke (cut where it becomes unreachable),
+        retreat home. ``plan.reachable`` is False when any of it is out of reach."""
+        s, e = clip_stroke(bin_spec, start, direction, length, self.radius + self.wall_margin)
         tip_z = max(float(start[2]) - self.press, self.radius + 0.001)
         surface = max(float(start[2]), 0.0)
         high_s = np.array([s[0], s[1], self.transit_height])
         near_s = np.array([s[0], s[1], min(surface + self.clearance, self.transit_height)])
         p0, p1 = np.array([s[0], s[1], tip_z]), np.array([e[0], e[1], tip_z])
-        home = self.home_qpos()
-        home_tip = HOME_TIP.astype(np.float64)
-
+        home, home_tip = self.home_qpos(), HOME_TIP.astype(np.float64)
         approach_tips = np.concatenate([self._line(home_tip, high_s, self.transit_speed),
                                         self._line(high_s, near_s, self.transit_speed),
                                         self._line(near_s, p0, self.press_speed)])
         approach = self.plan(approach_tips, home)
         if approach.reached < len(approach_tips):
-            return PushResult(p0.copy(), p0.copy(), 0, reachable=False)
+            return PushPlan(p0, p0, None, None, None, reachable=False)
         stroke_tips = self._line(p0, p1, self.speed)
         stroke = self.plan(stroke_tips, approach.qpos[-1])
-        reachable = stroke.reached == len(stroke_tips)
         last_q = stroke.qpos[-1] if stroke.reached else approach.qpos[-1]
-        last_tip = stroke_tips[stroke.reached - 1] if stroke.reached else p0
-        lift_tips = self._line(last_tip, np.array([last_tip[0], last_tip[1], self.transit_height]), self.transit_speed)
-        back_tips = np.concatenate([lift_tips, self._line(lift_tips[-1], home_tip, self.transit_speed)])
+        line_end = stroke_tips[stroke.reached - 1] if stroke.reached else p0
+        back_tips = self._line(line_end, np.array([line_end[0], line_end[1], self.transit_height]), self.transit_speed)
+        back_tips = np.concatenate([back_tips, self._line(back_tips[-1], home_tip, self.transit_speed)])
         back = self.plan(back_tips, last_q)
         back_q = back.qpos if back.reached == len(back_tips) else \
             np.concatenate([back.qpos, self._joint_line(back.qpos[-1] if back.reached else last_q, home)])
+        return PushPlan(p0, line_end, approach.qpos, stroke.qpos, back_q,
+                        reachable=stroke.reached == len(stroke_tips) and back.reached == len(back_tips))
 
-        hit = self._follow(approach.qpos, home)
+    def push(self, world: BinWorld, start: np.ndarray, direction: np.ndarray, length: float) -> PushResult:
+        plan = self.plan_push(world.bin, start, direction, length)
+        if plan.approach is None:                           # the start is out of reach: no motion at all
+            return PushResult(plan.start.copy(), plan.start.copy(), 0, reachable=False)
         errors = []
-        line_end = stroke_tips[stroke.reached - 1] if stroke.reached else p0
 
         def track(k):
-            errors.append(_distance_to_segment(self.tip_position(), p0, line_end))
+            errors.append(_distance_to_segment(self.tip_position(), plan.start, plan.line_end))
 
-        hit |= self._follow(stroke.qpos, approach.qpos[-1], on_step=track)
+        hit = self._follow(plan.approach, self.home_qpos())
+        hit |= self._follow(plan.stroke, plan.approach[-1], on_step=track)
         end = self.tip_position()
-        hit |= self._follow(back_q, last_q)
+        last_q = plan.stroke[-1] if len(plan.stroke) else plan.approach[-1]
+        hit |= self._follow(plan.back, last_q)
         err = np.array(errors) if errors else np.zeros(1)
-        return PushResult(p0.copy(), np.array([end[0], end[1], tip_z]), len(approach.qpos) + len(stroke.qpos) + len(back_q),
-                          reachable=reachable, arm_collision=bool(hit),
+        steps = len(plan.approach) + len(plan.stroke) + len(plan.back)
+        return PushResult(plan.start.copy(), np.array([end[0], end[1], plan.start[2]]), steps,
+                          reachable=plan.reachable, arm_collision=bool(hit),
                           tip_error_mean=float(err.mean()), tip_error_max=float(err.max()))
 
     def _joint_line(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
