@@ -45,6 +45,7 @@ def main() -> None:
     rng = np.random.default_rng(args.seed)
     escapes, nans, episodes = 0, 0, 0
     arm_hits, by_arm, unreachable = 0, 0, 0
+    escaped = set()                     # (episode, object index): an escaped object counts once here
     worst = None
     t0 = time.perf_counter()
     td = env.reset()
@@ -59,6 +60,7 @@ def main() -> None:
         arm_hits += hit
         by_arm += int(out_of_bin.sum()) if hit else 0
         unreachable += bool(out["next", *keys.PUSH_UNREACHABLE].item())
+        escaped.update((episodes, int(i)) for i in np.flatnonzero(out_of_bin))
         if out_of_bin.any():
             escapes += int(out_of_bin.sum())
             worst = (env.question.scene_id, k, poses[out_of_bin][:, :3].round(3).tolist())
@@ -72,7 +74,8 @@ def main() -> None:
                   f"largest object speed {peak['speed']:.3f} m/s; arm contacts {arm_hits}, escapes in those {by_arm}, "
                   f"unreachable {unreachable}", flush=True)
     print(f"{args.pushes} random pushes ({args.pusher}) on hard scenes ({episodes} episodes, {time.perf_counter() - t0:.0f} s): "
-          f"escapes {escapes}, NaN {nans}, largest object speed {peak['speed']:.3f} m/s; pushes with an arm part "
+          f"escapes {escapes} (objects out after a push, summed over pushes; {len(escaped)} distinct objects), NaN {nans}, "
+          f"largest object speed {peak['speed']:.3f} m/s; pushes with an arm part "
           f"(not the stick) touching something {arm_hits}, objects escaped in those {by_arm}; unreachable pushes {unreachable}")
     if worst:
         print(f"last escape: scene {worst[0]}, push {worst[1]}, positions {worst[2]}")

@@ -132,3 +132,22 @@ def test_missing_package_gives_install_hint(monkeypatch, sparse_dataset):
         SapienBinEnv(sparse_dataset, split=None, pusher="arm")
     with pytest.raises(ValueError, match="finger"):
         make_pusher("gripper")
+
+
+@needs_arm
+def test_contact_of_the_hand_is_reported(sparse_dataset):
+    import sapien
+
+    scene = sparse_dataset.scenes[0]
+    world = build_world(sparse_dataset.assets(scene), scene.poses, bin_spec=sparse_dataset.bin)
+    arm = ArmPusher()
+    arm.attach(world)
+    # a fixed block in the hand's way on its path from home to over the bin centre (the stick passes below it)
+    block = sapien.Entity()
+    body = sapien.physx.PhysxRigidStaticComponent()
+    body.attach(sapien.physx.PhysxCollisionShapeBox([0.04, 0.04, 0.04], sapien.physx.PhysxMaterial(0.5, 0.5, 0.0)))
+    block.add_component(body)
+    block.pose = sapien.Pose([-0.225, -0.15, 1.05])
+    world.scene.add_entity(block)
+    result = arm.push(world, np.array([0.0, 0.0, 0.0]), np.array([1.0, 0.0]), 0.14)
+    assert result.arm_collision

@@ -3,7 +3,8 @@
 A push, as the tool tip's path (the stick held vertical):
   home (out of the camera's view) → over the start point at ``transit_height`` (above the walls)
   → fast down to ``clearance`` above the surface → slowly down to the press depth (the finger's
-  start point) → along the push line (the finger's end point) → up to ``transit_height`` → home.
+  start point) → along the push line (the finger's end point) → 1 cm back along it and slowly up
+  by ``clearance`` (releasing what it pressed) → up to ``transit_height`` → home.
 Every physics step's tip waypoint becomes joint targets by inverse kinematics (SAPIEN's bundled
 pinocchio model, seeded with the previous solution), planned before anything moves, and the joints
 follow by position drives with velocity feed-forward. A waypoint the arm cannot reach (IK failure,
@@ -57,6 +58,8 @@ class ArmPusher:
     press: float = 0.015           # how far below the surface at the start point the tip aims (m), as the finger
     clearance: float = 0.03        # the fast descent stops this far above the surface (m)
     transit_height: float = 0.50   # tip height for moves over the walls (wall top 0.45 m)
+    release: float = 0.01          # back along the line before lifting (m): an object squeezed between the
+                                   # stick and a wall would otherwise ride up with it and over the wall
     wall_margin: float = 0.004     # clearance between stick and walls (m)
     stiffness: float = 1e4         # joint position drives (N·m/rad)
     damping: float = 1e3
@@ -199,8 +202,13 @@ class ArmPusher:
         stroke = self.plan(stroke_tips, approach.qpos[-1])
         last_q = stroke.qpos[-1] if stroke.reached else approach.qpos[-1]
         line_end = stroke_tips[stroke.reached - 1] if stroke.reached else p0
-        back_tips = self._line(line_end, np.array([line_end[0], line_end[1], self.transit_height]), self.transit_speed)
-        back_tips = np.concatenate([back_tips, self._line(back_tips[-1], home_tip, self.transit_speed)])
+        release = line_end - self.release * _unit(line_end - p0)          # off the pushed objects first
+        released = np.array([release[0], release[1], min(release[2] + self.clearance, self.transit_height)])
+        high_e = np.array([release[0], release[1], self.transit_height])
+        back_tips = np.concatenate([self._line(line_end, release, self.press_speed),
+                                    self._line(release, released, self.press_speed),
+                                    self._line(released, high_e, self.transit_speed),
+                                    self._line(high_e, home_tip, self.transit_speed)])
         back = self.plan(back_tips, last_q)
         back_q = back.qpos if back.reached == len(back_tips) else \
             np.concatenate([back.qpos, self._joint_line(back.qpos[-1] if back.reached else last_q, home)])
@@ -231,6 +239,11 @@ class ArmPusher:
         """Joint-space interpolation, the fallback retreat when the Cartesian one is not reachable."""
         n = max(int(np.ceil(np.abs(b - a).max() / MAX_JOINT_STEP)), 1)
         return a + (b - a) * (np.arange(1, n + 1) / n)[:, None]
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    n = float(np.linalg.norm(v))
+    return v / n if n > 1e-9 else np.zeros_like(v)
 
 
 def _distance_to_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
