@@ -30,3 +30,31 @@ def sparse_dataset(tmp_path_factory):
 
     return generate_dataset(tmp_path_factory.mktemp("mqa") / "sparse", seed=0, num_scenes={"easy": 1},
                             objects_per_scene={"easy": 4})
+
+
+@pytest.fixture(scope="session")
+def assert_bit_identical_replays():
+    """Check that two fresh envs from ``make_env()`` give bit-identical tensordicts over a reset and
+    ``pushes`` random pushes drawn from ``seed``."""
+    import torch
+
+    from mqa_rl import keys
+    from mqa_rl.envs import actions
+
+    def run(make_env, pushes: int, seed: int):
+        env = make_env()
+        gen = torch.Generator().manual_seed(seed)
+        td = env.reset()
+        out = [td]
+        for _ in range(pushes):
+            td[keys.ACTION] = torch.randint(0, actions.NUM_PUSHES, (), generator=gen)
+            td = env.step(td)["next"].clone()
+            out.append(td)
+        return out
+
+    def check(make_env, pushes: int, seed: int) -> None:
+        for x, y in zip(run(make_env, pushes, seed), run(make_env, pushes, seed)):
+            for key in x.keys(True, True):
+                assert torch.equal(x[key], y[key]), key
+
+    return check

@@ -83,21 +83,9 @@ def test_arm_is_out_of_the_image_when_observed(arm_env):
 
 
 @needs_arm
-def test_seeded_replays_with_the_arm_are_bit_identical(small_dataset):
-    def run():
-        env = SapienBinEnv(small_dataset, split=None, difficulties=["hard"], seed=5, max_pushes=3, pusher="arm")
-        gen = torch.Generator().manual_seed(1)
-        td = env.reset()
-        out = [td]
-        for _ in range(2):
-            td[keys.ACTION] = torch.randint(0, actions.NUM_PUSHES, (), generator=gen)
-            td = env.step(td)["next"].clone()
-            out.append(td)
-        return out
-
-    for x, y in zip(run(), run()):
-        for key in x.keys(True, True):
-            assert torch.equal(x[key], y[key]), key
+def test_seeded_replays_with_the_arm_are_bit_identical(small_dataset, assert_bit_identical_replays):
+    assert_bit_identical_replays(lambda: SapienBinEnv(small_dataset, split=None, difficulties=["hard"], seed=5, max_pushes=3,
+                                                      pusher="arm"), pushes=2, seed=1)
 
 
 @needs_arm

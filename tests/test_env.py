@@ -32,22 +32,8 @@ def test_specs(env):
     assert env.action_spec.space.n == 6273 == actions.NUM_ACTIONS
 
 
-def test_seeded_determinism_bit_for_bit(small_dataset):
-    def run():
-        e = SapienBinEnv(small_dataset, split=None, seed=7, max_pushes=3)
-        gen = torch.Generator().manual_seed(3)
-        td = e.reset()
-        out = [td]
-        for _ in range(3):
-            td[keys.ACTION] = torch.randint(0, actions.NUM_PUSHES, (), generator=gen)
-            td = e.step(td)["next"].clone()
-            out.append(td)
-        return out
-
-    a, b = run(), run()
-    for x, y in zip(a, b):
-        for key in x.keys(True, True):
-            assert torch.equal(x[key], y[key]), key
+def test_seeded_determinism_bit_for_bit(small_dataset, assert_bit_identical_replays):
+    assert_bit_identical_replays(lambda: SapienBinEnv(small_dataset, split=None, seed=7, max_pushes=3), pushes=3, seed=3)
 
 
 def test_reset_to_same_question_gives_identical_frames(env, small_dataset):
