@@ -67,9 +67,9 @@ def _lengthen_stick(hand: "sapien.wrapper.articulation_builder.LinkBuilder", ren
         hand.add_capsule_visual(pose, TOOL_RADIUS, half, sapien.render.RenderMaterial(base_color=list(TOOL_COLOR)))
 
 
-def build_panda(scene: sapien.Scene, render: bool) -> sapien.physx.PhysxArticulation:
-    """The Panda with the long stick, fixed on its pedestal at ``BASE_POSITION``, gravity off on every link
-    (a real Panda compensates gravity in its controller). Visual meshes only when ``render``."""
+def build_panda(scene: sapien.Scene, render: bool) -> tuple[sapien.physx.PhysxArticulation, sapien.Entity]:
+    """The Panda with the long stick, fixed at ``BASE_POSITION``, gravity off on every link (a real Panda
+    compensates gravity in its controller), and its pedestal. Visual meshes only when ``render``."""
     loader = scene.create_urdf_loader()
     loader.fix_root_link = True
     loader.set_density(ARM_DENSITY)
@@ -86,8 +86,7 @@ def build_panda(scene: sapien.Scene, render: bool) -> sapien.physx.PhysxArticula
         link.disable_gravity = True
         for shape in link.collision_shapes:
             shape.contact_offset = CONTACT_OFFSET
-    _pedestal(scene, render)
-    return robot
+    return robot, _pedestal(scene, render)
 
 
 def _pedestal(scene: sapien.Scene, render: bool) -> sapien.Entity:
