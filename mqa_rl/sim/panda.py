@@ -4,12 +4,13 @@ Why a long stick: the bin's walls are 45 cm high and piles reach ~35 cm, so a st
 past the hand) would drag the 20 cm wide hand through the pile on every floor-level push. The tool
 here is the stock stick of ``panda_stick.urdf`` (radius 8 mm, starting 5 cm below the hand frame)
 lengthened to end ``TOOL_LENGTH`` below the hand frame, with a rounded tip: with the tip on the
-floor the hand's lowest point is still above the wall top, so only the stick enters the bin.
+floor the hand's lowest point is still 3.4 cm above the wall top, so only the stick enters the bin
+(at 0.52 m, 7 mm above it, the 20 cm wide hand grazed a wall top when clutter tilted the stick).
 
-Why this mount: the base stands on a pedestal beside the bin's −x wall, its top level with the wall
+Why this mount: the base stands on a pedestal beside the bin's −x wall, its top 3 cm above the wall
 top; every tip position over the bin floor, from the floor to above the wall top, is reachable with
-the stick vertical (measured on an 8 × 8 grid at several heights; see ``benchmarks/arm_pusher.py``
-for the 28 × 28 action grid). The robot files are read from the installed package, never copied.
+the stick vertical (every push of the 28 × 28 × 8 action grid at the floor, 35 cm and the wall top:
+``benchmarks/arm_pusher.py reach``; a base 3 cm lower loses 7-16 % of them). The robot files are read from the installed package, never copied.
 """
 
 from __future__ import annotations
@@ -25,11 +26,11 @@ from mqa_rl.sim.scene import CONTACT_OFFSET
 URDF_IN_PACKAGE = "assets/robots/panda/panda_stick.urdf"
 INSTALL_HINT = "pip install 'mqa_rl[arm]'  (or: pip install --no-deps mani_skill==3.0.1; only its asset files are used)"
 
-BASE_POSITION = np.array([-0.50, 0.0, 0.45])   # world (m): 30 cm from the bin's centre line to the −x wall's outer face + 28 cm
-PEDESTAL_HALF_SIZE = np.array([0.12, 0.12, 0.225])   # a 24 × 24 × 45 cm column under the base
+BASE_POSITION = np.array([-0.50, 0.0, 0.48])   # world (m): 28 cm beyond the −x wall's outer face, 3 cm above the wall top
+PEDESTAL_HALF_SIZE = np.array([0.12, 0.12, 0.24])    # a 24 × 24 × 48 cm column under the base
 TOOL_RADIUS = 0.008                             # the stock stick's radius (m)
 TOOL_START = 0.05                               # the stock stick starts 5 cm below the hand frame (m)
-TOOL_LENGTH = 0.52                              # hand frame → tool tip (m); hand's lowest point is 6.6 cm below the frame
+TOOL_LENGTH = 0.55                              # hand frame → tool tip (m); hand's lowest point is 6.6 cm below the frame
 HAND_LINK = "panda_hand"
 TOOL_COLOR = (0.15, 0.15, 0.15, 1.0)
 PEDESTAL_COLOR = (0.30, 0.30, 0.32, 1.0)
