@@ -65,7 +65,7 @@ class ArmPusher:
     damping: float = 1e3
     tolerance: float = 0.005       # stated bound on the tip's distance to the push line (m), checked by tests
     contact_every: int = 8         # physics steps between contact checks (33 ms)
-    _home: np.ndarray | None = field(default=None, repr=False)
+    _home: np.ndarray | None = field(default=None, init=False, repr=False)
 
     radius = panda.TOOL_RADIUS
 
@@ -80,7 +80,7 @@ class ArmPusher:
         self._hand = robot.links[self._hand_index]
         self._limits = np.array([j.limits[0] for j in robot.active_joints], np.float64)
         self._joints = robot.active_joints
-        for j, effort in zip(self._joints, (87, 87, 87, 87, 12, 12, 12)):
+        for j, effort in zip(self._joints, panda.JOINT_TORQUE_LIMITS):
             j.set_drive_properties(self.stiffness, self.damping, float(effort))
         home = self.home_qpos()
         robot.qpos = home.astype(np.float32)

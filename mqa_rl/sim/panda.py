@@ -10,7 +10,8 @@ floor the hand's lowest point is still 3.4 cm above the wall top, so only the st
 Why this mount: the base stands on a pedestal beside the bin's −x wall, its top 3 cm above the wall
 top; every tip position over the bin floor, from the floor to above the wall top, is reachable with
 the stick vertical (every push of the 28 × 28 × 8 action grid at the floor, 35 cm and the wall top:
-``benchmarks/arm_pusher.py reach``; a base 3 cm lower loses 7-16 % of them). The robot files are read from the installed package, never copied.
+``benchmarks/arm_pusher.py reach``; with the base 3 cm lower, level with the wall top, 84-93 % of a
+coarse subset). The robot files are read from the installed package, never copied.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ TOOL_RADIUS = 0.008                             # the stock stick's radius (m)
 TOOL_START = 0.05                               # the stock stick starts 5 cm below the hand frame (m)
 TOOL_LENGTH = 0.55                              # hand frame → tool tip (m); hand's lowest point is 6.6 cm below the frame
 HAND_LINK = "panda_hand"
+JOINT_TORQUE_LIMITS = (87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0)   # N·m, the URDF's efforts (Franka's datasheet)
 TOOL_COLOR = (0.15, 0.15, 0.15, 1.0)
 PEDESTAL_COLOR = (0.30, 0.30, 0.32, 1.0)
 ARM_DENSITY = 1000.0
