@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import torch
 
 GRID = 28
 DIRECTIONS = 8
@@ -43,3 +44,17 @@ def direction_xy(direction: int) -> np.ndarray:
 def cell_centre_uv(row: int, col: int, height: int, width: int) -> np.ndarray:
     """Continuous image coordinates (u, v) of grid cell (row, col)'s centre."""
     return np.array([(col + 0.5) * width / GRID, (row + 0.5) * height / GRID])
+
+
+def push_start_mask(bin_spec, camera) -> torch.Tensor:
+    """bool [NUM_ACTIONS]: True for pushes whose cell centre lies over the bin floor, and for stop.
+
+    Derived from the geometry (the cell centre's ray meets the floor z = 0 inside the inner walls), so
+    it follows whatever bin size and camera framing the dataset has. The same cells are allowed in
+    every direction; stop is always allowed.
+    """
+    rows, cols = np.meshgrid(np.arange(GRID), np.arange(GRID), indexing="ij")
+    uv = np.stack([(cols + 0.5) * camera.width / GRID, (rows + 0.5) * camera.height / GRID], axis=-1)
+    floor = camera.unproject(uv, np.full(uv.shape[:-1], camera.distance))
+    inside = torch.from_numpy(bin_spec.inside(floor).reshape(-1))
+    return torch.cat([inside.repeat(DIRECTIONS), torch.ones(1, dtype=torch.bool)])
