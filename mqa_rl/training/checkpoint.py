@@ -1,0 +1,66 @@
+"""``TrainingCheckpoint``: everything a DQN run needs to continue after SIGKILL, saved atomically.
+
+Components (``torchrl.checkpoint.Checkpoint``, one directory each, written to a hidden stage and
+renamed into place; ``CheckpointRotation`` keeps the newest ``keep_last``): the Q-network, the loss
+module (online and target parameters), the optimiser, the replay buffer (storage, priorities,
+writer cursor), the ε-greedy module (its ε), the run counters (``state``: frames, updates,
+episodes, next evaluation / checkpoint frame, target-updater counter, β step counter) and the
+global RNG state (python, numpy, torch).
+
+The run is saved between a finished update phase and the next collection, so a resumed run restarts
+collection from the saved frame count: no frame is lost or collected twice (the episodes in flight at
+the kill are restarted from a reset). A checkpoint that cannot be read raises ``CheckpointCorrupt``
+with its path and what to do.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import torch
+from torchrl.checkpoint import Checkpoint, CheckpointError, CheckpointRotation, GlobalRNGState
+
+
+class CheckpointCorrupt(RuntimeError):
+    """A checkpoint exists but cannot be restored (truncated, edited, or from another config)."""
+
+
+class TrainingCheckpoint:
+    def __init__(self, directory: str | Path, *, actor, loss, optimizer, replay_buffer, egreedy, target_updater,
+                 beta_counter: torch.Tensor, state: dict, keep_last: int = 2):
+        self.directory = Path(directory)
+        self.rotation = CheckpointRotation(self.directory, keep_last=keep_last)
+        self.state = state
+        self.target_updater = target_updater
+        self.beta_counter = beta_counter
+        self.checkpoint = Checkpoint(policy=actor, loss=loss, optimizer=optimizer, replay_buffer=replay_buffer,
+                                     exploration=egreedy, trainer_state=state, rng=GlobalRNGState())
+
+    def save(self) -> Path:
+        """Write a checkpoint at the current frame count (atomically); returns its path."""
+        self.state["target_updater_counter"] = int(getattr(self.target_updater, "counter", 0))
+        self.state["beta_steps"] = int(self.beta_counter)
+        return self.rotation.save(self.checkpoint, step=int(self.state["frames"]))
+
+    def latest(self) -> Path | None:
+        return self.rotation.latest() if self.directory.exists() else None
+
+    def load(self, path: str | Path | None = None) -> Path:
+        """Restore every component from ``path`` (default: the newest checkpoint) in place."""
+        path = Path(path) if path is not None else self.latest()
+        if path is None:
+            raise FileNotFoundError(f"no checkpoint in {self.directory}")
+        hint = (f"delete {path} to resume from an older checkpoint in {self.directory}, "
+                f"or start afresh with resume=false (or another out_dir)")
+        try:
+            self.checkpoint.load(path, strict="error")
+        except (CheckpointError, OSError, ValueError, KeyError, RuntimeError, EOFError) as error:
+            raise CheckpointCorrupt(f"checkpoint {path} cannot be restored ({type(error).__name__}: "
+                                    f"{str(error)[:500]}); {hint}") from error
+        missing = {"frames", "updates"} - set(self.state)
+        if missing:
+            raise CheckpointCorrupt(f"checkpoint {path} lacks the run counters {sorted(missing)}; {hint}")
+        if hasattr(self.target_updater, "counter"):
+            self.target_updater.counter = int(self.state.get("target_updater_counter", 0))
+        self.beta_counter.fill_(int(self.state.get("beta_steps", 0)))
+        return path
