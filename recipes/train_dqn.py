@@ -13,6 +13,7 @@ sync weights; greedy evaluation on the test split and checkpoints every so many 
 
 from __future__ import annotations
 
+import os
 import random
 import signal
 import time
@@ -131,6 +132,10 @@ def train(cfg: DictConfig) -> dict:
         print(f"resumed from {path} at {state['frames']} frames, {state['updates']} updates "
               f"({dropped} log rows after it dropped)")
     config = OmegaConf.to_container(cfg, resolve=True)
+    if not (out / "config.yaml").exists():  # what recipes/evaluate_policy.py rebuilds the network from
+        tmp = out / f".config.yaml.tmp{os.getpid()}"
+        OmegaConf.save(OmegaConf.create(config), tmp)
+        os.replace(tmp, out / "config.yaml")
     logger = RunLogger(out, wandb=cfg.logger.wandb, project=cfg.logger.project,
                        exp_name=f"dqn_{cfg.reward.name}_{cfg.model.trunk}", config=config)
 

@@ -46,7 +46,7 @@ def make_collector(cfg: Mapping, policy, env_kwargs: Mapping, *, total_frames: i
     else:
         cls = MultiSyncCollector if kind == "multi_sync" else MultiAsyncCollector
         coll = cls([make_mqa_env] * workers, policy, create_env_kwargs=[dict(env_kwargs)] * workers,
-                   num_threads=int(cfg.get("learner_threads", torch.get_num_threads())), num_sub_threads=1, **common)
+                   num_threads=int(cfg.get("learner_threads") or torch.get_num_threads()), num_sub_threads=1, **common)
     if seed is not None:
         coll.set_seed(seed)
     return coll

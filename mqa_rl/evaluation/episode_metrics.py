@@ -25,6 +25,8 @@ from mqa_rl.transforms.episode_stats import mean_target_chi
 from mqa_rl.transforms.functional import is_simple_scene
 
 FULLY_HIDDEN = 1.0 - 1e-6
+FINAL_KEYS = (keys.TARGET_MASK, keys.OVERLAP, keys.TARGET_CHI_START, keys.EPISODE_REWARD, keys.PUSH_COUNT,
+              keys.IS_STOP, keys.EPISODE_TERMS)
 
 
 def episode_metrics(final: TensorDictBase, simple_threshold: float = 0.2) -> dict[str, torch.Tensor]:

@@ -8,7 +8,7 @@ import torch
 from tensordict import TensorDictBase
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
-from mqa_rl.evaluation.episode_metrics import episode_metrics
+from mqa_rl.evaluation.episode_metrics import FINAL_KEYS, episode_metrics
 
 
 def run_episodes(env, policy, episodes: int, *, max_pushes: int, simple_threshold: float = 0.2,
@@ -25,7 +25,7 @@ def run_episodes(env, policy, episodes: int, *, max_pushes: int, simple_threshol
             if not bool(rollout["next", "done"][-1].item()):
                 raise RuntimeError(f"episode {i} did not end within {max_pushes + 1} steps: is the env's "
                                    f"max_pushes larger than {max_pushes}?")
-            finals.append(rollout["next"][-1])
+            finals.append(rollout["next"][-1].select(*FINAL_KEYS, strict=False))
             if on_episode is not None:
                 on_episode(i, rollout)
     return episode_metrics(torch.stack(finals), simple_threshold)
