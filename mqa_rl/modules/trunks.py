@@ -75,13 +75,16 @@ def load_torchvision_weights(net: nn.Module, arch: str, path: str | Path) -> Non
         raise TrunkWeightsError(f"cannot read trunk weights {path} ({type(error).__name__}: {error}); {hint}") from error
     if not isinstance(state, dict):
         raise TrunkWeightsError(f"{path} holds a {type(state).__name__}, not a state dict; {hint}")
-    result = net.load_state_dict(state, strict=False)
-    wrong_shapes = [k for k, v in state.items() if k in net.state_dict() and net.state_dict()[k].shape != v.shape]
-    if result.missing_keys or result.unexpected_keys or wrong_shapes:
+    own = net.state_dict()
+    missing = [k for k in own if k not in state]
+    unexpected = [k for k in state if k not in own and not k.endswith("num_batches_tracked")]  # frozen BN drops it
+    wrong_shapes = [k for k, v in state.items() if k in own and (not torch.is_tensor(v) or own[k].shape != v.shape)]
+    if missing or unexpected or wrong_shapes:
         raise TrunkWeightsError(
-            f"{path} is not a torchvision {arch} state dict: {len(result.missing_keys)} missing keys "
-            f"(e.g. {result.missing_keys[:3]}), {len(result.unexpected_keys)} unexpected (e.g. "
-            f"{result.unexpected_keys[:3]}), {len(wrong_shapes)} of another shape; {hint}")
+            f"{path} is not a torchvision {arch} state dict: {len(missing)} missing keys (e.g. {missing[:3]}), "
+            f"{len(unexpected)} unexpected (e.g. {unexpected[:3]}), {len(wrong_shapes)} of another shape "
+            f"(e.g. {wrong_shapes[:3]}); {hint}")
+    net.load_state_dict(state)
 
 
 def make_trunk(name: str, weights: str | Path | None = None, light_channels=(16, 32, 64, 64)) -> nn.Module:

@@ -5,7 +5,9 @@ renamed into place; ``CheckpointRotation`` keeps the newest ``keep_last``): the 
 module (online and target parameters), the optimiser, the replay buffer (storage, priorities,
 writer cursor), the ε-greedy module (its ε), the run counters (``state``: frames, updates,
 episodes, next evaluation / checkpoint frame, target-updater counter, β step counter) and the
-global RNG state (python, numpy, torch).
+global RNG state (python, numpy, torch), and last the SHA-256 of every file of the others
+(``IntegrityAdapter``), checked before anything is restored: a truncated or altered file is refused
+instead of being loaded as garbage (a truncated memmap would otherwise read as zeros).
 
 The run is saved between a finished update phase and the next collection, so a resumed run restarts
 collection from the saved frame count: no frame is lost or collected twice (the episodes in flight at
@@ -15,14 +17,56 @@ with its path and what to do.
 
 from __future__ import annotations
 
+import hashlib
+import json
 from pathlib import Path
 
 import torch
-from torchrl.checkpoint import Checkpoint, CheckpointError, CheckpointRotation, GlobalRNGState
+from torchrl.checkpoint import Checkpoint, CheckpointAdapter, CheckpointError, CheckpointRotation, GlobalRNGState
+
+INTEGRITY = "zz_integrity"        # sorts last: saved after every other component of the checkpoint
 
 
 class CheckpointCorrupt(RuntimeError):
     """A checkpoint exists but cannot be restored (truncated, edited, or from another config)."""
+
+
+def _digests(components_dir: Path, skip: Path) -> dict[str, str]:
+    out = {}
+    for f in sorted(components_dir.rglob("*")):
+        if f.is_file() and skip not in f.parents:
+            h = hashlib.sha256()
+            with f.open("rb") as fh:
+                for block in iter(lambda: fh.read(1 << 22), b""):
+                    h.update(block)
+            out[f.relative_to(components_dir).as_posix()] = h.hexdigest()
+    return out
+
+
+class IntegrityAdapter(CheckpointAdapter):
+    """Writes the SHA-256 of the files of the components saved before it (they sort first)."""
+
+    adapter_id = "mqa_rl.sha256"
+    format_version = 1
+
+    def save(self, component, path: Path, *, args, kwargs):
+        path.mkdir(parents=True, exist_ok=True)
+        (path / "sha256.json").write_text(json.dumps(_digests(path.parent, path), indent=0))
+
+    def load(self, component, path: Path, *, map_location, tensor_load_kwargs, args, kwargs):
+        return None                       # verified before loading (TrainingCheckpoint.verify)
+
+    @staticmethod
+    def verify(checkpoint_dir: Path) -> None:
+        """Raise ``ValueError`` naming the files that are missing or differ from their digests."""
+        found = list((checkpoint_dir / "components").glob(f"*{INTEGRITY}/sha256.json"))
+        if not found:
+            raise ValueError("no integrity record (sha256.json): not a complete mqa_rl training checkpoint")
+        expected = json.loads(found[0].read_text())
+        actual = _digests(checkpoint_dir / "components", found[0].parent)
+        bad = sorted(k for k in expected if actual.get(k) != expected[k]) + sorted(set(actual) - set(expected))
+        if bad:
+            raise ValueError(f"{len(bad)} file(s) missing or changed since saved, e.g. {bad[:3]}")
 
 
 class TrainingCheckpoint:
@@ -35,6 +79,8 @@ class TrainingCheckpoint:
         self.beta_counter = beta_counter
         self.checkpoint = Checkpoint(policy=actor, loss=loss, optimizer=optimizer, replay_buffer=replay_buffer,
                                      exploration=egreedy, trainer_state=state, rng=GlobalRNGState())
+        self.checkpoint.register(INTEGRITY, {}, adapter=IntegrityAdapter())
+        self.replay_buffer = replay_buffer
 
     def save(self) -> Path:
         """Write a checkpoint at the current frame count (atomically); returns its path."""
@@ -46,13 +92,17 @@ class TrainingCheckpoint:
         return self.rotation.latest() if self.directory.exists() else None
 
     def load(self, path: str | Path | None = None) -> Path:
-        """Restore every component from ``path`` (default: the newest checkpoint) in place."""
+        """Restore every component from ``path`` (default: the newest checkpoint) in place, into a
+        fresh run (nothing sampled from the replay yet)."""
         path = Path(path) if path is not None else self.latest()
         if path is None:
             raise FileNotFoundError(f"no checkpoint in {self.directory}")
+        if len(self.replay_buffer):
+            raise RuntimeError("load a checkpoint into a fresh run only (this replay buffer already holds data)")
         hint = (f"delete {path} to resume from an older checkpoint in {self.directory}, "
                 f"or start afresh with resume=false (or another out_dir)")
         try:
+            IntegrityAdapter.verify(path)
             self.checkpoint.load(path, strict="error")
         except (CheckpointError, OSError, ValueError, KeyError, RuntimeError, EOFError) as error:
             raise CheckpointCorrupt(f"checkpoint {path} cannot be restored ({type(error).__name__}: "
