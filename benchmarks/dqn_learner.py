@@ -11,6 +11,10 @@ collector workers and prints them.
 
 from __future__ import annotations
 
+import os
+
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")   # as the recipe: idle OpenMP threads sleep
+
 import argparse
 import csv
 import statistics

@@ -64,9 +64,9 @@ class ResNetTrunk(nn.Module):
 def load_torchvision_weights(net: nn.Module, arch: str, path: str | Path) -> None:
     """Load a torchvision ``state_dict`` file into ``net``; clear errors for a wrong or missing file."""
     path = Path(path).expanduser()
-    hint = (f"give trunk.weights the path of torchvision's ImageNet state dict for {arch} "
+    hint = (f"give model.weights the path of torchvision's ImageNet state dict for {arch} "
             f"(a file saved with torch.save(torchvision.models.{arch}(weights=...).state_dict(), path)), "
-            f"or trunk.weights=null for random initialisation")
+            f"or model.weights=null for random initialisation")
     if not path.is_file():
         raise TrunkWeightsError(f"trunk weights file {path} does not exist: {hint}")
     try:
@@ -91,11 +91,11 @@ def make_trunk(name: str, weights: str | Path | None = None, light_channels=(16,
     """A trunk by name (``TRUNKS``); ``weights`` only applies to the ResNets."""
     if name == "light":
         if weights is not None:
-            raise TrunkWeightsError("the light trunk has no pretrained weights: set trunk.weights=null")
+            raise TrunkWeightsError("the light trunk has no pretrained weights: set model.weights=null")
         return LightTrunk(3, tuple(light_channels))
     if name in ("resnet18", "resnet101"):
         if weights is None:
-            warnings.warn(f"{name} trunk initialised at random (trunk.weights=null): the paper used ImageNet weights",
+            warnings.warn(f"{name} trunk initialised at random (model.weights=null): the paper used ImageNet weights",
                           stacklevel=2)
         return ResNetTrunk(name, weights)
     raise ValueError(f"unknown trunk {name!r}; choose one of {TRUNKS}")
