@@ -41,6 +41,10 @@ from torchrl.data import Categorical  # noqa: E402
 VOCAB, QLEN, SIZE = 120, 14, 224
 MODELS = {  # the recipe's model configs (recipes/conf/model/*.yaml)
     "light": {"trunk": "light", "head_context": 2, "coords": True, "fuse_channels": [64, 32]},
+    "light_ds2": {"trunk": "light", "light_downsample": 2, "head_context": 2, "coords": True, "fuse_channels": [64, 32]},
+    "light_ds2_c32": {"trunk": "light", "light_downsample": 2, "light_channels": [16, 32, 32, 32], "head_context": 2,
+                      "coords": True, "fuse_channels": [32]},
+    "light_ds2_ctx0": {"trunk": "light", "light_downsample": 2, "head_context": 0, "coords": True, "fuse_channels": [64, 32]},
     "resnet18": {"trunk": "resnet18", "fuse_channels": [128, 32], "freeze_trunk": False},
     "resnet101": {"trunk": "resnet101", "fuse_channels": [512, 128, 32]},
 }

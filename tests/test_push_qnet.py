@@ -56,16 +56,17 @@ def test_flat_output_is_channel_row_col_then_stop():
     assert torch.allclose(flat[..., actions.STOP], maps[:, :, 8].mean((-2, -1)), atol=1e-6)
 
 
-@pytest.mark.parametrize("trunk", ["light", "resnet18"])
+@pytest.mark.parametrize("trunk,downsample", [("light", 1), ("light", 2), ("resnet18", 1)])
 @pytest.mark.parametrize("d,row,col", [(2, 14, 10), (6, 9, 20)])
-def test_feature_cell_is_centred_on_the_image_cell(trunk, d, row, col):
+def test_feature_cell_is_centred_on_the_image_cell(trunk, downsample, d, row, col):
     """The input pixels that Q[d, row, col] depends on are centred on grid cell (row, col).
 
     GroupNorm statistics tie every output to the whole image, so the light trunk's norms are
     replaced by identities here: the alignment is a property of the convolutions and the shift."""
     torch.manual_seed(0)
     with pytest.warns(UserWarning, match="random") if trunk != "light" else _nullcontext():
-        net = PushQNet(VOCAB, camera_distance=0.9, trunk=trunk, fuse_channels=(32,), head_context=0, coords=False)
+        net = PushQNet(VOCAB, camera_distance=0.9, trunk=trunk, fuse_channels=(32,), head_context=0, coords=False,
+                       light_downsample=downsample)
     for t in (net.rgb_trunk, net.depth_trunk):
         for i, m in enumerate(t.body):
             if isinstance(m, torch.nn.GroupNorm):

@@ -19,9 +19,10 @@ Depth enters as height above the bin floor, ``(camera_distance − depth) / dept
 camera height. The ResNet trunks get it as 3 identical channels (as the authors did) and rgb with
 the ImageNet mean/std, to suit pretrained weights.
 
-Options beyond the paper (``paper`` profile: all off): ``head_context`` 3×3 convs before the final
-1×1 layers (a push acts 7 cells away; 1×1 heads only see their own cell), ``coords`` two channels of
-grid coordinates (where the walls are).
+Options beyond the paper (``paper`` profile: all off): ``head_context`` 3×3 convs (at the width of
+the first head layer, after a 1×1 reduction) before the final 1×1 layers (a push acts 7 cells away;
+1×1 heads only see their own cell), ``coords`` two channels of grid coordinates (where the walls
+are), ``light_downsample`` (the light trunk on a 2×2-averaged image).
 """
 
 from __future__ import annotations
@@ -72,6 +73,7 @@ class PushQNet(nn.Module):
         trunk: str = "light",
         weights: str | None = None,
         light_channels=(16, 32, 64, 64),
+        light_downsample: int = 1,
         fuse_channels=(512, 128, 32),
         question_dim: int = 32,
         head_channels=(32, 16),
@@ -82,15 +84,13 @@ class PushQNet(nn.Module):
     ):
         super().__init__()
         self.trunk_name = trunk
-        self.rgb_trunk = make_trunk(trunk, weights, light_channels)
-        self.depth_trunk = make_trunk(trunk, weights, light_channels)
+        self.imagenet_input = trunk != "light"
+        self.depth_channels = 3 if self.imagenet_input else 1    # the ResNets see depth as 3 copies
+        self.rgb_trunk = make_trunk(trunk, weights, light_channels, light_downsample)
+        self.depth_trunk = make_trunk(trunk, weights, light_channels, light_downsample, in_channels=self.depth_channels)
         if freeze_trunk:
             for p in (*self.rgb_trunk.parameters(), *self.depth_trunk.parameters()):
                 p.requires_grad_(False)
-        self.imagenet_input = trunk != "light"
-        self.depth_channels = 3 if self.imagenet_input else 1
-        if not self.imagenet_input:           # the light trunk sees depth as one channel
-            self.depth_trunk.body[0] = nn.Conv2d(1, light_channels[0], 5, 2, 2, bias=False)
         self.camera_distance = float(camera_distance)
         self.depth_scale = float(depth_scale)
         feat = self.rgb_trunk.out_channels + self.depth_trunk.out_channels
@@ -98,8 +98,14 @@ class PushQNet(nn.Module):
         self.question = QuestionEncoder(vocab_size, out=question_dim)
         self.coords = coords
         state = fuse_channels[-1] + question_dim + (2 if coords else 0)
-        context = [nn.Sequential(nn.Conv2d(state, state, 3, padding=1), nn.ReLU(inplace=True)) for _ in range(head_context)]
-        self.head = nn.Sequential(*context, _conv_stack([state, *head_channels, actions.DIRECTIONS + 1], last_relu=False))
+        if head_context:      # 1×1 down to head_channels[0], then 3×3 convs at that width
+            width = head_channels[0]
+            context = [nn.Conv2d(state, width, 1), nn.ReLU(inplace=True)]
+            for _ in range(head_context):
+                context += [nn.Conv2d(width, width, 3, padding=1), nn.ReLU(inplace=True)]
+            self.head = nn.Sequential(*context, _conv_stack([*head_channels, actions.DIRECTIONS + 1], last_relu=False))
+        else:                 # the paper: 1×1 convs only
+            self.head = nn.Sequential(_conv_stack([state, *head_channels, actions.DIRECTIONS + 1], last_relu=False))
         self.register_buffer("rgb_mean", torch.tensor(IMAGENET_MEAN).view(1, 3, 1, 1) if self.imagenet_input
                              else torch.full((1, 3, 1, 1), 0.5))
         self.register_buffer("rgb_std", torch.tensor(IMAGENET_STD).view(1, 3, 1, 1) if self.imagenet_input
@@ -113,11 +119,14 @@ class PushQNet(nn.Module):
         h = torch.where(d > 0, (self.camera_distance - d) / self.depth_scale, torch.zeros_like(d))
         return x, h.expand(-1, self.depth_channels, -1, -1)
 
-    @staticmethod
-    def _align(x: torch.Tensor) -> torch.Tensor:
-        """Shift the image up-left by half a grid cell so stride-8 features centre on the cells."""
-        shift = x.shape[-1] // (2 * actions.GRID)
-        if shift == 0:
+    def _align(self, x: torch.Tensor) -> torch.Tensor:
+        """Shift the image up-left so that feature cell (r, c) centres on grid cell (r, c).
+
+        A stride-8 trunk centres output r on input pixel 8r + offset; the cell centre is pixel
+        8r + 3.5 (pixel-index coordinates): shift by round(3.5 − offset) (0.5 px off at worst)."""
+        cell = x.shape[-1] / actions.GRID
+        shift = int(round(cell / 2 - 0.5 - self.rgb_trunk.centre_offset))
+        if shift <= 0:
             return x
         return F.pad(x[..., shift:, shift:], (0, shift, 0, shift), mode="replicate")
 

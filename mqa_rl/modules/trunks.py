@@ -27,16 +27,25 @@ class TrunkWeightsError(RuntimeError):
 
 
 class LightTrunk(nn.Module):
-    """Four conv layers (5×5/2, 3×3/2, 3×3/2, 3×3) with GroupNorm: stride 8, ``channels[-1]`` out."""
+    """Four conv layers (5×5, 3×3, 3×3, 3×3) with GroupNorm, stride 8 in all, ``channels[-1]`` out.
 
-    def __init__(self, in_channels: int = 3, channels: tuple[int, ...] = (16, 32, 64, 64)):
+    ``downsample=2`` first averages 2×2 pixels (224 → 112; objects stay 10-30 px wide) and then
+    strides 2, 2, 1, 1: the same 28×28 map for ~4× fewer multiply-adds.
+    """
+
+    def __init__(self, in_channels: int = 3, channels: tuple[int, ...] = (16, 32, 64, 64), downsample: int = 1):
         super().__init__()
+        if downsample not in (1, 2):
+            raise ValueError(f"light trunk downsample must be 1 or 2, got {downsample}")
         c1, c2, c3, c4 = channels
-        layers = []
-        for cin, cout, k, s in ((in_channels, c1, 5, 2), (c1, c2, 3, 2), (c2, c3, 3, 2), (c3, c4, 3, 1)):
-            layers += [nn.Conv2d(cin, cout, k, s, k // 2, bias=False), nn.GroupNorm(min(8, cout), cout), nn.ReLU(inplace=True)]
+        strides = (2, 2, 2, 1) if downsample == 1 else (2, 2, 1, 1)
+        layers: list[nn.Module] = [nn.AvgPool2d(2)] if downsample == 2 else []
+        for (cin, cout, k), st in zip(((in_channels, c1, 5), (c1, c2, 3), (c2, c3, 3), (c3, c4, 3)), strides):
+            layers += [nn.Conv2d(cin, cout, k, st, k // 2, bias=False), nn.GroupNorm(min(8, cout), cout), nn.ReLU(inplace=True)]
         self.body = nn.Sequential(*layers)
         self.out_channels = c4
+        # output cell r is centred on input pixel 8r + centre_offset (pixel-index coordinates)
+        self.centre_offset = 0.5 if downsample == 2 else 0.0
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return self.body(x)
@@ -54,6 +63,7 @@ class ResNetTrunk(nn.Module):
         if weights is not None:
             load_torchvision_weights(net, arch, weights)
         self.body = nn.Sequential(net.conv1, net.bn1, net.relu, net.maxpool, net.layer1, net.layer2)
+        self.centre_offset = 0.0
         last = net.layer2[-1]                    # BasicBlock (resnet18) or Bottleneck (resnet101)
         self.out_channels = (last.conv3 if hasattr(last, "conv3") else last.conv2).out_channels
 
@@ -87,12 +97,13 @@ def load_torchvision_weights(net: nn.Module, arch: str, path: str | Path) -> Non
     net.load_state_dict(state)
 
 
-def make_trunk(name: str, weights: str | Path | None = None, light_channels=(16, 32, 64, 64)) -> nn.Module:
-    """A trunk by name (``TRUNKS``); ``weights`` only applies to the ResNets."""
+def make_trunk(name: str, weights: str | Path | None = None, light_channels=(16, 32, 64, 64),
+               light_downsample: int = 1, in_channels: int = 3) -> nn.Module:
+    """A trunk by name (``TRUNKS``); ``weights`` only applies to the ResNets, ``in_channels`` to light."""
     if name == "light":
         if weights is not None:
             raise TrunkWeightsError("the light trunk has no pretrained weights: set model.weights=null")
-        return LightTrunk(3, tuple(light_channels))
+        return LightTrunk(in_channels, tuple(light_channels), light_downsample)
     if name in ("resnet18", "resnet101"):
         if weights is None:
             warnings.warn(f"{name} trunk initialised at random (model.weights=null): the paper used ImageNet weights",
