@@ -5,8 +5,8 @@ acting forward pass, and the replay bytes per transition. Synthetic batches with
     python benchmarks/dqn_learner.py --trunks light --batch 16 32 --threads 2
 
 End-to-end env steps/s of the training loop come from the recipe's own log (``time/env_steps_per_s``,
-``time/updates_per_s`` in ``csv/scalars``); ``--e2e DATASET`` runs a short training with 1 and 2
-collector workers and prints them.
+``time/updates_per_s``, ``time/loop_env_steps_per_s`` in ``csv/scalars``); ``--e2e DATASET`` runs short
+trainings with 1 and 2 collector workers (and 1 asynchronous one) and prints them.
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ import warnings
 from pathlib import Path
 
 import torch
+from omegaconf import OmegaConf
 from tensordict import TensorDict
 
 sys.path.insert(0, str(Path(__file__).parents[1]))
@@ -39,15 +40,9 @@ from mqa_rl.sim.geometry import BinSpec, CameraSpec  # noqa: E402
 from torchrl.data import Categorical  # noqa: E402
 
 VOCAB, QLEN, SIZE = 120, 14, 224
-MODELS = {  # the recipe's model configs (recipes/conf/model/*.yaml)
-    "light": {"trunk": "light", "head_context": 2, "coords": True, "fuse_channels": [64, 32]},
-    "light_ds2": {"trunk": "light", "light_downsample": 2, "head_context": 2, "coords": True, "fuse_channels": [64, 32]},
-    "light_ds2_c32": {"trunk": "light", "light_downsample": 2, "light_channels": [16, 32, 32, 32], "head_context": 2,
-                      "coords": True, "fuse_channels": [32]},
-    "light_ds2_ctx0": {"trunk": "light", "light_downsample": 2, "head_context": 0, "coords": True, "fuse_channels": [64, 32]},
-    "resnet18": {"trunk": "resnet18", "fuse_channels": [128, 32], "freeze_trunk": False},
-    "resnet101": {"trunk": "resnet101", "fuse_channels": [512, 128, 32]},
-}
+CONF = Path(__file__).parents[1] / "recipes" / "conf" / "trunk"
+MODELS = {p.stem: dict(OmegaConf.to_container(OmegaConf.load(p))) for p in sorted(CONF.glob("*.yaml"))}   # the recipe's
+MODELS["light_full_res"] = {**MODELS["light"], "light_downsample": 1}                                     # for comparison
 
 
 def fake_transitions(n: int, gen: torch.Generator) -> TensorDict:
@@ -97,12 +92,16 @@ def time_update(model: dict, batch: int, repeats: int) -> tuple[float, float]:
 
 
 def e2e(dataset: str, frames: int) -> None:
+    """Short training runs (smoke profile, but 10 pushes per episode and the default light trunk)."""
     root = Path(__file__).parents[1]
-    for workers, kind in ((1, "single"), (1, "multi_sync"), (2, "multi_sync")):
+    for kind, workers in (("single", 1), ("multi_sync", 2), ("multi_async", 1)):
         with tempfile.TemporaryDirectory() as out:
             args = [sys.executable, str(root / "recipes" / "train_dqn.py"), "profile=smoke", f"dataset={dataset}",
-                    f"out_dir={out}", f"collector.kind={kind}", f"collector.num_workers={workers}",
-                    f"collector.total_frames={frames}", f"collector.frames_per_batch={8 * workers}", "logger.wandb=false"]
+                    f"out_dir={out}", f"collector={kind}", f"collector.num_workers={workers}",
+                    f"collector.total_frames={frames}", f"collector.frames_per_batch={8 * workers}",
+                    "env.max_pushes=10", "eval.episodes=1", f"eval.interval_frames={frames}",
+                    f"checkpoint.interval_frames={frames}", "buffer.size=256", "buffer.batch_size=16",
+                    "loss.updates_per_batch=4"]
             t0 = time.perf_counter()
             run = subprocess.run(args, capture_output=True, text=True)
             wall = time.perf_counter() - t0
@@ -110,25 +109,23 @@ def e2e(dataset: str, frames: int) -> None:
                 print(run.stdout[-2000:], run.stderr[-3000:])
                 continue
             rows = {}
-            for name in ("time/env_steps_per_s", "time/updates_per_s"):
-                path = Path(out) / "csv" / "scalars" / f"{name.replace('/', '_')}.csv"
-                if not path.exists():
-                    path = next(Path(out).rglob(f"{name.split('/')[-1]}.csv"), path)
-                with open(path) as f:
+            for name in ("time/env_steps_per_s", "time/updates_per_s", "time/loop_env_steps_per_s"):
+                with open(Path(out) / "csv" / "scalars" / f"{name}.csv") as f:
                     rows[name] = [float(r[1]) for r in csv.reader(f)]
-            print(f"{kind:>11} x{workers}: {frames} frames in {wall:.0f} s wall (incl. start-up); "
-                  f"loop env steps/s {statistics.mean(rows['time/env_steps_per_s']):.2f}, "
-                  f"updates/s {statistics.mean(rows['time/updates_per_s']):.2f}")
+            print(f"{kind:>11} x{workers}: {frames} frames, {wall:.0f} s wall incl. start-up; collection "
+                  f"{statistics.median(rows['time/env_steps_per_s']):.2f} env steps/s (median over batches), "
+                  f"updates {statistics.median(rows['time/updates_per_s']):.2f}/s (batch 16), "
+                  f"loop end to end {rows['time/loop_env_steps_per_s'][-1]:.2f} env steps/s (0.5 updates/frame)")
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--trunks", nargs="+", default=list(MODELS))
+    ap.add_argument("--trunks", nargs="+", default=["light", "light_full_res", "resnet18", "resnet101"])
     ap.add_argument("--batch", nargs="+", type=int, default=[16])
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--threads", type=int, default=torch.get_num_threads())
     ap.add_argument("--e2e", metavar="DATASET", help="also run the recipe briefly with 1 and 2 workers on DATASET")
-    ap.add_argument("--e2e-frames", type=int, default=48)
+    ap.add_argument("--e2e-frames", type=int, default=96)
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     example = compact_transitions(fake_transitions(1, torch.Generator().manual_seed(0)))[0]
@@ -136,6 +133,7 @@ def main() -> None:
     print(f"replay: {b / 1e3:.1f} kB per transition ({SIZE}² images) -> 4,000: {4000 * b / 2**30:.2f} GiB, "
           f"50,000: {50000 * b / 2**30:.1f} GiB (memmap on disk)")
     print(f"torch threads: {torch.get_num_threads()}")
+    print(f"load average before: {os.getloadavg()[0]:.2f} (the machine is shared: timings vary with it)")
     for trunk in args.trunks:
         for batch in args.batch:
             upd, act = time_update(MODELS[trunk], batch, args.repeats)

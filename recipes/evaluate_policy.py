@@ -50,7 +50,7 @@ def load_greedy(run: Path, checkpoint: str | None, env):
         if path is None:
             raise FileNotFoundError(f"no checkpoint in {run / 'checkpoints'}: train first, or give checkpoint=...")
     try:
-        Checkpoint(policy=actor).load(path, components=["policy"], strict="error")
+        Checkpoint(policy=actor).load(path, components=["policy"], strict="error", map_location="cpu")
     except Exception as error:
         raise CheckpointCorrupt(f"cannot load the policy from {path} ({error}); is it a train_dqn.py checkpoint "
                                 f"of this run's config?") from error

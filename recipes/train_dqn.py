@@ -19,6 +19,7 @@ import os
 # 2 cores, spinning torch threads made updates 7-40x slower (measured); set before torch loads.
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
+import copy  # noqa: E402
 import random  # noqa: E402
 import signal  # noqa: E402
 import time  # noqa: E402
@@ -68,6 +69,14 @@ def check_config(cfg: DictConfig) -> None:
                                 f"or point dataset=... at one")
 
 
+def learner_device(name: str) -> torch.device:
+    """The learner's device (``device=cpu|cuda|cuda:1``); the envs and acting stay on the CPU."""
+    device = torch.device(name)
+    if device.type == "cuda" and not torch.cuda.is_available():
+        raise ValueError(f"device={name} but torch sees no CUDA device (torch {torch.__version__}); use device=cpu")
+    return device
+
+
 def evaluate(env, actor, cfg: DictConfig, logger: RunLogger, step: int) -> dict[str, float]:
     """Greedy episodes on the eval split (same questions every time); Q-map image and videos."""
     base = env.base_env
@@ -105,11 +114,14 @@ def train(cfg: DictConfig) -> dict:
     eval_env = make_mqa_env(**{**env_kwargs, "split": cfg.eval.split, "difficulties": cfg.eval.difficulties},
                             seed=cfg.seed + 10_000)
     vocab = eval_env.observation_spec[keys.QUESTION].space.n
-    net = make_push_qnet(cfg.model, vocab_size=vocab, camera_distance=eval_env.base_env.camera.distance)
+    device = learner_device(cfg.device)
+    net = make_push_qnet(cfg.model, vocab_size=vocab, camera_distance=eval_env.base_env.camera.distance).to(device)
     actor = make_q_actor(net, eval_env.action_spec, masked=cfg.action_mask)
     explore = make_explorer(actor, eval_env.action_spec, eps_init=col.eps_init, eps_end=col.eps_end,
-                            annealing_frames=col.annealing_frames, masked=cfg.action_mask)
+                            annealing_frames=col.annealing_frames, masked=cfg.action_mask).to(device)
     egreedy = explore[-1]
+    # the envs act on the CPU: a learner on a GPU hands a CPU copy of the policy to the collector
+    acting = explore if device.type == "cpu" else copy.deepcopy(explore).to("cpu")
 
     # ---- loss, optimiser, replay
     loss, target_updater = make_dqn_loss(actor, cfg.loss)
@@ -147,7 +159,7 @@ def train(cfg: DictConfig) -> dict:
     total = int(col.total_frames)
     remaining = total - state["frames"]
     if remaining > 0:
-        collector = make_collector(col, explore, {**env_kwargs, "counter": counter}, total_frames=remaining,
+        collector = make_collector(col, acting, {**env_kwargs, "counter": counter}, total_frames=remaining,
                                    seed=cfg.seed + state["frames"])
         if cfg.threads:
             torch.set_num_threads(cfg.threads)
@@ -177,14 +189,14 @@ def train(cfg: DictConfig) -> dict:
                 if state["frames"] >= col.learning_starts and len(rb) >= buf.batch_size:
                     losses, qs = [], []
                     for _ in range(cfg.loss.updates_per_batch):
-                        sample = rb.sample()
+                        sample = rb.sample().to(device)
                         out_td = loss(sample)
                         optim.zero_grad()
                         out_td["loss"].backward()
                         torch.nn.utils.clip_grad_norm_(params, cfg.optim.max_grad_norm)
                         optim.step()
                         target_updater.step()
-                        rb.update_tensordict_priority(sample)
+                        rb.update_tensordict_priority(sample.to("cpu"))
                         state["updates"] += 1
                         losses.append(out_td["loss"].item())
                         qs.append(sample[keys.TD_ERROR].mean().item())
@@ -194,6 +206,8 @@ def train(cfg: DictConfig) -> dict:
                                         "train/mean_q": float(data[keys.CHOSEN_ACTION_VALUE].mean()),
                                         "train/is_beta": rb.sampler.beta,
                                         "time/updates_per_s": len(losses) / max(time.perf_counter() - t0, 1e-9)})
+                if acting is not explore:
+                    acting.load_state_dict(explore.state_dict())
                 collector.update_policy_weights_()
                 state["train_seconds"] += time.perf_counter() - t_wait
                 metrics["time/loop_env_steps_per_s"] = (state["frames"] - frames_at_start) / (time.perf_counter() - start)
@@ -201,7 +215,7 @@ def train(cfg: DictConfig) -> dict:
                 metrics["train/episodes"] = state["episodes"]
 
                 if state["frames"] >= state["next_eval"] or state["frames"] >= total:
-                    metrics.update(evaluate(eval_env, actor, cfg, logger, state["frames"]))
+                    metrics.update(evaluate(eval_env, acting[0], cfg, logger, state["frames"]))
                     while state["next_eval"] <= state["frames"]:
                         state["next_eval"] += int(cfg.eval.interval_frames)
                 logger.log_metrics(metrics, step=state["frames"])
