@@ -13,20 +13,12 @@ from mqa_rl.losses.replay import (REPLAY_KEYS, annealed_is_beta, compact_transit
                                   transition_bytes)
 from mqa_rl.modules.push_policy import make_push_qnet, make_q_actor
 from mqa_rl.sim.geometry import BinSpec, CameraSpec
+from torch_threads import one_torch_thread  # noqa: F401  (autouse)
 
 VOCAB, L, S = 30, 8, 224
 SMALL_NET = {"trunk": "light", "light_channels": [8, 8, 16, 16], "fuse_channels": [16, 8], "head_channels": [8],
              "question_dim": 8, "head_context": 1, "coords": True}
 
-
-
-@pytest.fixture(autouse=True)
-def _one_torch_thread():
-    """The machines are shared: two torch threads on a busy 2-core machine spin-wait (measured 40x slower)."""
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
 
 def transitions(n: int, seed: int = 0) -> TensorDict:
     """Collected-like transitions (with info, which the replay drops)."""

@@ -12,18 +12,10 @@ from mqa_rl.modules.push_policy import make_explorer, make_push_qnet, make_q_act
 from mqa_rl.modules.push_qnet import PushQNet
 from mqa_rl.modules.trunks import TrunkWeightsError, make_trunk
 from mqa_rl.sim.geometry import BinSpec, CameraSpec
+from torch_threads import one_torch_thread  # noqa: F401  (autouse)
 
 VOCAB, L, S = 30, 8, 224
 
-
-
-@pytest.fixture(autouse=True)
-def _one_torch_thread():
-    """The machines are shared: two torch threads on a busy 2-core machine spin-wait (measured 40x slower)."""
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
 
 def _obs(batch=(), seed=0):
     g = torch.Generator().manual_seed(seed)

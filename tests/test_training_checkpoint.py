@@ -16,16 +16,8 @@ from mqa_rl.losses.replay import compact_transitions, make_replay_buffer
 from mqa_rl.modules.push_policy import make_explorer, make_push_qnet, make_q_actor
 from mqa_rl.training.checkpoint import CheckpointCorrupt, TrainingCheckpoint
 from test_dqn_learning import SMALL_NET, VOCAB, transitions
+from torch_threads import one_torch_thread  # noqa: F401  (autouse)
 
-
-
-@pytest.fixture(autouse=True)
-def _one_torch_thread():
-    """The machines are shared: two torch threads on a busy 2-core machine spin-wait (measured 40x slower)."""
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
 
 def build(tmp_path, name, seed):
     torch.manual_seed(seed)
