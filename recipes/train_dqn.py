@@ -21,6 +21,7 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import copy  # noqa: E402
 import random  # noqa: E402
+import shutil  # noqa: E402
 import signal  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -61,9 +62,8 @@ def check_config(cfg: DictConfig) -> None:
         raise ValueError(f"buffer.size={buf.size} must be ≥ buffer.batch_size={buf.batch_size}")
     if not 0.0 <= col.eps_end <= col.eps_init <= 1.0:
         raise ValueError(f"need 0 ≤ collector.eps_end ({col.eps_end}) ≤ collector.eps_init ({col.eps_init}) ≤ 1")
-    for name in ("interval_frames",):
-        if cfg.eval[name] <= 0 or cfg.checkpoint[name] <= 0:
-            raise ValueError("eval.interval_frames and checkpoint.interval_frames must be positive")
+    if cfg.eval.interval_frames <= 0 or cfg.checkpoint.interval_frames <= 0:
+        raise ValueError("eval.interval_frames and checkpoint.interval_frames must be positive")
     if not Path(cfg.dataset).exists():
         raise FileNotFoundError(f"dataset {cfg.dataset} does not exist: make it with recipes/make_dataset.py "
                                 f"or point dataset=... at one")
@@ -93,7 +93,9 @@ def evaluate(env, actor, cfg: DictConfig, logger: RunLogger, step: int) -> dict[
 
     metrics = run_episodes(env, actor, cfg.eval.episodes, max_pushes=cfg.env.max_pushes,
                            simple_threshold=cfg.reward.simple_threshold, on_episode=media)
-    return {f"eval/{k}": v for k, v in summarise(metrics).items()}
+    means = summarise(metrics)
+    means["stop_rate"] = means.pop("stopped")
+    return {f"eval/{k}": v for k, v in means.items()}
 
 
 def train(cfg: DictConfig) -> dict:
@@ -129,8 +131,6 @@ def train(cfg: DictConfig) -> dict:
     optim = torch.optim.Adam(params, lr=cfg.optim.lr, weight_decay=cfg.optim.weight_decay)
     scratch = Path(buf.scratch_dir) if buf.scratch_dir else out / "replay_scratch"
     if scratch.exists():                     # a previous (killed) process's memmap files: not a checkpoint
-        import shutil
-
         shutil.rmtree(scratch)
     rb = make_replay_buffer(buf, scratch)
 
@@ -148,6 +148,8 @@ def train(cfg: DictConfig) -> dict:
         dropped = trim_scalars(out / "csv", state["frames"])
         print(f"resumed from {path} at {state['frames']} frames, {state['updates']} updates "
               f"({dropped} log rows after it dropped)")
+    elif cfg.resume:
+        print(f"resume=true but no checkpoint in {ckpt.directory}: starting a new run")
     config = OmegaConf.to_container(cfg, resolve=True)
     if not (out / "config.yaml").exists():  # what recipes/evaluate_policy.py rebuilds the network from
         tmp = out / f".config.yaml.tmp{os.getpid()}"

@@ -13,6 +13,7 @@ from torchrl.envs import TransformedEnv
 
 from mqa_rl import keys
 from mqa_rl.envs.sapien_bin import SapienBinEnv
+from mqa_rl.transforms.base import RewardTerm
 from mqa_rl.transforms.episode_stats import EpisodeStats
 from mqa_rl.transforms.factory import make_reward_transform
 
@@ -25,8 +26,7 @@ def make_mqa_env(dataset, reward: Mapping | None = None, counter: torch.Tensor |
     if reward is None:
         return env
     stack = make_reward_transform(reward, push_length=env.push_length, counter=counter)
-    if episode_stats:
-        terms = [t.out_key[1] for t in stack if getattr(t, "out_key", (None,))[0] == keys.REWARD_TERMS and t.out_key not in
-                 (keys.BETA, keys.SIMPLE_SCENE)]
-        stack.append(EpisodeStats(tuple(terms)))
+    if episode_stats:           # sum the reward terms (not β nor the simple-scene flag) over episodes
+        summed = [t.out_key[1] for t in stack if isinstance(t, RewardTerm) and t.out_key not in (keys.BETA, keys.SIMPLE_SCENE)]
+        stack.append(EpisodeStats(tuple(summed)))
     return TransformedEnv(env, stack)
