@@ -17,6 +17,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from mqa_rl.data import DatasetError, MQADataset, generate_dataset
 from mqa_rl.data.stats import plot_statistics
+from mqa_rl.data.storage import recover_leftovers
 
 
 @hydra.main(config_path="conf", config_name="make_dataset", version_base="1.3")
@@ -24,6 +25,7 @@ def main(cfg: DictConfig) -> None:
     d = cfg.dataset
     out = Path(d.out_dir)
     ds = None
+    recover_leftovers(out)            # an interrupted earlier run: restore or clean up, with a warning
     if out.exists() and not d.overwrite:
         try:
             ds = MQADataset(out)

@@ -16,12 +16,14 @@ import numpy as np
 
 import mqa_rl
 from mqa_rl.data.questions import QUESTION_TYPES, Question, question_text, scene_questions, under_matrix
-from mqa_rl.data.storage import DatasetError, dumps_json, read_verified, write_dataset_atomically
+from mqa_rl.data.arguments import scene_plan, seed_and_fraction
+from mqa_rl.data.storage import DatasetError, check_out_dir, dumps_json, read_verified, write_dataset_atomically
 from mqa_rl.data.vocab import ANSWERS, Vocabulary
 from mqa_rl.sim.assets import ObjectAsset
 from mqa_rl.sim.geometry import BinSpec, CameraSpec
 
 DEFAULT_NUM_SCENES = {"easy": 30, "medium": 30, "hard": 40}
+LEVELS = tuple(DEFAULT_NUM_SCENES)                               # difficulty levels, easiest first
 SPLITS = ("train", "test")
 
 
@@ -96,17 +98,14 @@ def generate_dataset(
     ``objects_per_scene`` overrides the paper's object counts per level (for sparser or denser
     scenes). Everything derives from ``seed``: the same seed gives the same files, byte for byte.
     """
-    from mqa_rl.data.scenes import DIFFICULTIES, settle_scene
+    from mqa_rl.data.scenes import DIFFICULTIES, drop_config, settle_scene
     from mqa_rl.data.stats import answer_statistics
     from mqa_rl.sim.silhouette import silhouettes
 
-    num_scenes = dict(DEFAULT_NUM_SCENES if num_scenes is None else num_scenes)
-    per_level = {**DIFFICULTIES, **(objects_per_scene or {})}
-    unknown = (set(num_scenes) | set(per_level)) - set(DIFFICULTIES)
-    if unknown:
-        raise ValueError(f"unknown difficulty {sorted(unknown)}; allowed: {list(DIFFICULTIES)}")
-    if not 0 < train_fraction < 1:
-        raise ValueError(f"train_fraction must be in (0, 1), got {train_fraction}")
+    num_scenes, per_level = scene_plan(DEFAULT_NUM_SCENES if num_scenes is None else num_scenes,
+                                       objects_per_scene, DIFFICULTIES)
+    seed, train_fraction = seed_and_fraction(seed, train_fraction)
+    check_out_dir(out_dir, overwrite)                     # before the work, not after it
     assets, phrases = _library(library)
     names = [a.name for a in assets]
     if len(set(names)) != len(names):
@@ -177,7 +176,7 @@ def generate_dataset(
         "generator": f"mqa_rl {mqa_rl.__version__}",
         "seed": seed,
         "config": {"num_scenes": num_scenes, "objects_per_scene": per_level, "train_fraction": train_fraction,
-                   "bin": vars(bin_spec), "camera": vars(camera)},
+                   "bin": vars(bin_spec), "camera": vars(camera), "drop": drop_config()},
         "counts": {"objects": len(assets), "classes": len(classes), "scenes": len(scenes), "questions": len(lines)},
         "drop_attempts": {"total": int(sum(attempts)), "max": int(max(attempts, default=0))},
     }
@@ -186,6 +185,20 @@ def generate_dataset(
 
 
 # ----------------------------------------------------------------------------------------- loading
+def _chosen(value, allowed: tuple[str, ...], what: str) -> set[str]:
+    """A filter's names: None or empty → all of ``allowed``; a name outside ``allowed`` is refused."""
+    if value is None:
+        return set(allowed)
+    try:
+        chosen = {value} if isinstance(value, str) else set(value)
+    except TypeError:
+        raise ValueError(f"a {what} filter is a name or a list of names from {list(allowed)}, got {value!r}") from None
+    bad = chosen - set(allowed)
+    if bad:
+        raise ValueError(f"unknown {what} {sorted(bad, key=str)}; allowed: {list(allowed)}")
+    return chosen or set(allowed)
+
+
 class MQADataset:
     """A generated dataset, verified against its manifest on load.
 
@@ -246,14 +259,13 @@ class MQADataset:
             raise KeyError(f"unknown question id {question_id!r}; ids look like {self.questions[0].id!r}") from None
 
     def select(self, split=None, difficulties=None, types=None) -> list[Question]:
-        """Questions filtered by split ("train"/"test"), difficulty levels and question types."""
-        for value, allowed, what in ((split, SPLITS, "split"), (types, QUESTION_TYPES, "question type")):
-            bad = set([value] if isinstance(value, str) else value or ()) - set(allowed)
-            if bad:
-                raise ValueError(f"unknown {what} {sorted(bad)}; allowed: {list(allowed)}")
-        splits = {split} if isinstance(split, str) else set(split or SPLITS)
-        levels = {difficulties} if isinstance(difficulties, str) else set(difficulties or ("easy", "medium", "hard"))
-        kinds = {types} if isinstance(types, str) else set(types or QUESTION_TYPES)
+        """Questions filtered by split ("train"/"test"), difficulty levels and question types.
+
+        Each filter is None (all), one name or a list of names; an unknown name raises ``ValueError``.
+        """
+        splits = _chosen(split, SPLITS, "split")
+        levels = _chosen(difficulties, LEVELS, "difficulty")
+        kinds = _chosen(types, QUESTION_TYPES, "question type")
         return [
             q for q in self.questions
             if q.type in kinds and self._scene_by_id[q.scene_id].split in splits
@@ -279,7 +291,7 @@ class MQADataset:
         rows = [f"MQA dataset at {self.root} (schema {self.manifest['schema_version']}, seed {self.manifest['seed']})",
                 f"  {len(self._object_rows)} objects in {len(self.classes)} classes: {', '.join(self.classes)}",
                 f"  {len(self.scenes)} scenes:"]
-        for level in ("easy", "medium", "hard"):
+        for level in LEVELS:
             rows.append(f"    {level:<6} train {levels[(level, 'train')]:>3}  test {levels[(level, 'test')]:>3}")
         by_type = Counter(q.type for q in self.questions)
         rows.append(f"  {len(self.questions)} questions: " + ", ".join(f"{t} {by_type[t]}" for t in QUESTION_TYPES))

@@ -28,6 +28,8 @@ from typing import Any
 import numpy as np
 import trimesh
 
+from mqa_rl.data.object_sizes import REAL_LENGTH
+
 RGBA = tuple[float, float, float, float]
 
 INSTANCES_PER_CLASS = 3
@@ -754,6 +756,7 @@ CLASS_NAMES: tuple[str, ...] = tuple(_SPECS)
 CLASS_PHRASES: dict[str, tuple[str, str]] = {name: spec.phrases for name, spec in _SPECS.items()}
 
 assert all(len(spec.instances) == INSTANCES_PER_CLASS for spec in _SPECS.values())
+assert set(REAL_LENGTH) == set(_SPECS) and all(len(v) == INSTANCES_PER_CLASS for v in REAL_LENGTH.values())
 
 
 def _bounds(meshes) -> np.ndarray:
@@ -762,7 +765,8 @@ def _bounds(meshes) -> np.ndarray:
 
 
 def make_object(class_name: str, instance_id: int) -> ObjectModel:
-    """Build one instance of a class, re-centred on its bounding box."""
+    """Build one instance of a class, re-centred on its bounding box and scaled to its real size
+    (longest side from ``mqa_rl.data.object_sizes.REAL_LENGTH``)."""
     if class_name not in _SPECS:
         raise ValueError(f"unknown object class {class_name!r}; expected one of: {', '.join(CLASS_NAMES)}")
     valid_id = isinstance(instance_id, (int, np.integer)) and not isinstance(instance_id, bool)
@@ -772,9 +776,11 @@ def make_object(class_name: str, instance_id: int) -> ObjectModel:
         )
     spec = _SPECS[class_name]
     parts = spec.builder(**spec.instances[int(instance_id)])
-    center = _bounds(part.mesh for part in parts).mean(axis=0)
+    lower, upper = _bounds(part.mesh for part in parts)
+    scale = REAL_LENGTH[class_name][int(instance_id)][0] / float((upper - lower).max())
     for part in parts:
-        part.mesh.apply_translation(-center)
+        part.mesh.apply_translation(-(lower + upper) / 2)
+        part.mesh.apply_scale(scale)
     return ObjectModel(class_name=class_name, instance_id=int(instance_id), parts=tuple(parts),
                        density=spec.density)
 

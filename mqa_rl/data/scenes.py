@@ -1,9 +1,15 @@
 """Bin scenes: objects thrown into the bin in SAPIEN and settled, as the paper's V-REP scenes were.
 
-Objects fall in waves of ``WAVE`` from just above the current pile, with random orientations, inside
-temporarily raised walls (so nothing bounces out while falling). A scene is accepted when every
-object sleeps (PhysX's rest test) within ``MAX_SETTLE_STEPS`` and rests inside the real bin: centre
-within the inner walls and below the wall top. Otherwise it is dropped again with fresh randomness.
+"The objects are thrown into the bin randomly": like the contents of a box emptied into a tote, the
+objects are poured one by one (random orientations, xy jitter ``DROP_SPREAD``, each released just
+above the current pile) into a square sleeve of ``SLEEVE_SIZE`` standing at a random point near the
+bin centre; the sleeve is then lifted at ``SLEEVE_LIFT_SPEED`` and the column slumps into a pile.
+With real-size objects this hides objects under others at every level (the task's premise; without
+the sleeve, 20 objects spread into one layer and almost nothing is hidden). A scene is accepted when
+every object sleeps within ``MAX_SETTLE_STEPS`` and rests inside the real bin (centre within the
+inner walls and below the wall top), and when it is a true rest state: rebuilt awake from the
+stored float32 poses, nothing moves more than ``REST_TOLERANCE`` in ``VERIFY_STEPS``. Otherwise it
+is dropped again with fresh randomness.
 """
 
 from __future__ import annotations
@@ -17,11 +23,15 @@ from mqa_rl.sim.assets import ObjectAsset
 from mqa_rl.sim.geometry import BinSpec
 
 DIFFICULTIES = {"easy": 20, "medium": 35, "hard": 50}   # objects per scene (paper, Sec. III-C)
-WAVE = 9                        # objects released together (a 3 × 3 grid)
-WAVE_STEPS = 90                 # physics steps between waves (0.375 s)
+WAVE = 1                        # objects released together, as one column (1: poured one by one)
+WAVE_STEPS = 40                 # physics steps between waves (1/6 s)
+DROP_SPREAD = 0.03              # σ of each object's xy offset from the drop point (m)
+DROP_POINT_RANGE = 0.05         # the drop point is uniform in ±this around the bin centre (m)
+SLEEVE_SIZE = 0.25              # inner side of the tube the objects are poured into (m); 0: none
+SLEEVE_LIFT_SPEED = 0.2         # m/s
 MAX_SETTLE_STEPS = 2400         # 10 s of simulated time
 MAX_ATTEMPTS = 10
-DROP_WALL_HEIGHT = 0.6          # walls while dropping (m)
+DROP_WALL_HEIGHT = 1.5          # walls and sleeve while pouring (m): a poured column reaches ~1.4 m
 VERIFY_STEPS = 240              # 1 s of simulated time
 VERIFY_ROUNDS = 4
 REST_TOLERANCE = 0.002          # m
@@ -44,15 +54,19 @@ def _f32(x: np.ndarray) -> np.ndarray:
     return np.asarray(x, np.float32).astype(np.float64)
 
 
-def _drop_poses(rng: np.random.Generator, assets: list[ObjectAsset], base_z: float, bin_spec: BinSpec) -> np.ndarray:
-    """Poses for one wave: a jittered 3 × 3 grid, random orientations, bottoms above ``base_z``."""
+def _column_poses(rng: np.random.Generator, assets: list[ObjectAsset], base_z: float, point: np.ndarray,
+                  bin_spec: BinSpec) -> np.ndarray:
+    """Poses for one wave: a column above ``point``, each object's bounding sphere clear of the one
+    below, xy jittered by ``DROP_SPREAD`` (kept inside the walls), random orientations."""
     n = len(assets)
-    cell = (bin_spec.inner_size - 0.08) / 3
-    slots = rng.permutation(9)[:n]
-    xy = (np.stack([slots % 3, slots // 3], 1) - 1.0) * cell + rng.uniform(-0.01, 0.01, (n, 2))
-    quat_xyzw = Rotation.random(n, random_state=rng).as_quat()
     radius = np.array([np.linalg.norm(a.dimensions) / 2 for a in assets])
-    z = base_z + radius.max() + 0.01
+    lim = bin_spec.half - radius[:, None]
+    offset = rng.normal(0.0, DROP_SPREAD, (n, 2))
+    if SLEEVE_SIZE:
+        offset = np.clip(offset, -(SLEEVE_SIZE / 2 - 0.03), SLEEVE_SIZE / 2 - 0.03)
+    xy = np.clip(point + offset, -lim, lim)
+    z = base_z + 0.01 + np.cumsum(radius) + np.concatenate([[0.0], np.cumsum(radius[:-1])]) + 0.005 * np.arange(n)
+    quat_xyzw = Rotation.random(n, random_state=rng).as_quat()
     poses = np.zeros((n, 7))
     poses[:, :2] = xy
     poses[:, 2] = z
@@ -65,20 +79,26 @@ def settle_scene(
     assets: list[ObjectAsset], indices: np.ndarray, rng: np.random.Generator, bin_spec: BinSpec = BinSpec()
 ) -> SettledScene:
     """Throw ``assets[indices]`` into the bin and let them settle; re-drop until valid."""
-    from mqa_rl.sim.scene import add_object, build_world
+    from mqa_rl.sim.scene import add_object, add_sleeve, build_world, lift_sleeve
 
     chosen = [assets[i] for i in indices]
     drop_bin = BinSpec(bin_spec.inner_size, DROP_WALL_HEIGHT, bin_spec.wall_thickness)
     for attempt in range(1, MAX_ATTEMPTS + 1):
         world = build_world([], np.zeros((0, 7)), bin_spec=drop_bin)
         steps = 0
+        point = rng.uniform(-DROP_POINT_RANGE, DROP_POINT_RANGE, 2)
+        sleeve = add_sleeve(world, point, SLEEVE_SIZE, DROP_WALL_HEIGHT) if SLEEVE_SIZE else []
         for start in range(0, len(chosen), WAVE):
             wave = chosen[start:start + WAVE]
-            top = max((p[2] for p in world.poses()), default=0.0)
-            for asset, pose in zip(wave, _drop_poses(rng, wave, top + 0.02, bin_spec)):
+            top = max((p[2] + np.linalg.norm(a.dimensions) / 2 for p, a in zip(world.poses(), world.assets)), default=0.0)
+            for asset, pose in zip(wave, _column_poses(rng, wave, top, point, bin_spec)):
                 add_object(world, asset, pose)
             world.step(WAVE_STEPS)
             steps += WAVE_STEPS
+        if sleeve:
+            steps += world.settle(MAX_SETTLE_STEPS)
+            pile_top = max(p[2] + np.linalg.norm(a.dimensions) / 2 for p, a in zip(world.poses(), world.assets))
+            steps += lift_sleeve(world, sleeve, SLEEVE_LIFT_SPEED, pile_top + 0.05)
         steps += world.settle(MAX_SETTLE_STEPS)
         poses = _f32(world.poses())
         for _ in range(VERIFY_ROUNDS):
@@ -95,3 +115,9 @@ def settle_scene(
             steps += world.settle(MAX_SETTLE_STEPS)
             poses = _f32(world.poses())
     raise SceneGenerationError(f"no valid settled scene after {MAX_ATTEMPTS} drops of {len(indices)} objects")
+
+
+def drop_config() -> dict:
+    """The pouring parameters, recorded in the dataset manifest."""
+    return {"wave": WAVE, "wave_steps": WAVE_STEPS, "drop_spread": DROP_SPREAD, "drop_point_range": DROP_POINT_RANGE,
+            "sleeve_size": SLEEVE_SIZE, "sleeve_lift_speed": SLEEVE_LIFT_SPEED}

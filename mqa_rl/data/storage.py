@@ -10,9 +10,12 @@ Layout (every file but ``manifest.json`` is listed in the manifest with its SHA-
     vocab.json           question vocabulary (itos) and answer vocabulary
     stats.json           answer statistics (the paper's Fig. 4)
 
-Writes go to a hidden sibling folder that is renamed into place only once complete, so an
-interrupted generation never leaves a folder that loads. Files contain no timestamps: the same seed
-gives the same bytes.
+Writes go to a hidden sibling folder (``.NAME.tmp-<pid>-<id>``) that is renamed into place only once
+complete, so an interrupted generation never leaves a folder that loads. An overwrite moves the old
+dataset aside (``.NAME.old-<pid>-<id>``) for the instant between two renames. A process killed
+mid-way leaves these behind: the loader and the next generation notice them (``recover_leftovers``),
+restore an old dataset whose replacement never arrived, remove the rest, and say so with a warning.
+Files contain no timestamps: the same seed gives the same bytes.
 """
 
 from __future__ import annotations
@@ -22,9 +25,10 @@ import json
 import os
 import shutil
 import uuid
+import warnings
 from pathlib import Path
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2    # 2: real-size objects, piled scenes, 40 × 40 × 45 cm bin, camera framing the rim
 MANIFEST = "manifest.json"
 
 
@@ -41,13 +45,79 @@ def sha256(data: bytes) -> str:
     return hashlib.sha256(data).hexdigest()
 
 
-def write_dataset_atomically(out_dir: Path, files: dict[str, bytes], manifest: dict, overwrite: bool = False) -> Path:
-    """Write ``files`` (relative path → bytes) and a manifest listing their checksums into ``out_dir``."""
+def _hidden_sibling(out_dir: Path, tag: str) -> Path:
+    return out_dir.parent / f".{out_dir.name}.{tag}-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+
+
+def _writer_alive(path: Path) -> bool:
+    """Whether the process named in a hidden sibling's name still runs (then it is no leftover)."""
+    parts = path.name.rsplit("-", 2)
+    if len(parts) != 3 or not parts[1].isdigit() or int(parts[1]) == os.getpid():
+        return False
+    try:
+        os.kill(int(parts[1]), 0)
+    except ProcessLookupError:
+        return False
+    except OSError:             # exists, owned by someone else
+        return True
+    return True
+
+
+def _leftovers(out_dir: Path, tag: str) -> list[Path]:
+    prefix = f".{out_dir.name}.{tag}-"
+    if not out_dir.parent.is_dir():
+        return []
+    found = [p for p in out_dir.parent.iterdir() if p.name.startswith(prefix) and p.is_dir()]
+    return sorted((p for p in found if not _writer_alive(p)), key=lambda p: p.stat().st_mtime)
+
+
+def _remove(path: Path, why: str) -> None:
+    try:
+        shutil.rmtree(path)
+        warnings.warn(f"removed {path}: {why}", stacklevel=3)
+    except OSError as e:
+        warnings.warn(f"could not remove {path} ({why}): {e}; delete it by hand", stacklevel=3)
+
+
+def recover_leftovers(out_dir) -> None:
+    """Undo what a killed ``write_dataset_atomically`` left next to ``out_dir``, with a warning each.
+
+    A ``.NAME.old-*`` folder while ``NAME`` is missing is the previous dataset of an overwrite killed
+    between its two renames: it is renamed back. Other ``.old-*`` and every ``.tmp-*`` (unfinished
+    writes) are removed. Folders of a writer that is still running are left alone.
+    """
     out_dir = Path(out_dir)
+    olds = _leftovers(out_dir, "old")
+    if olds and not out_dir.exists():
+        newest = olds.pop()
+        os.rename(newest, out_dir)
+        warnings.warn(f"restored {out_dir} from {newest.name}, left by an overwrite that was interrupted "
+                      f"before the new dataset was moved into place", stacklevel=2)
+    for old in olds:
+        _remove(old, "the previous dataset of an overwrite that was interrupted while deleting it")
+    for tmp in _leftovers(out_dir, "tmp"):
+        _remove(tmp, "an unfinished dataset write that was interrupted (it never became a dataset)")
+
+
+def check_out_dir(out_dir, overwrite: bool) -> Path:
+    """Recover leftovers, then refuse an ``out_dir`` that must not be written: before any work is done."""
+    out_dir = Path(out_dir)
+    recover_leftovers(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise FileExistsError(f"{out_dir} is a file, not a dataset folder; choose another path")
     if out_dir.exists() and not overwrite:
         raise FileExistsError(f"{out_dir} already exists; pass overwrite=True (or choose another folder)")
+    if out_dir.exists() and not (out_dir / MANIFEST).is_file() and any(out_dir.iterdir()):
+        raise FileExistsError(f"{out_dir} is not an mqa_rl dataset (no {MANIFEST}) and not empty: refusing to "
+                              f"replace it with overwrite=True; choose another folder or empty it yourself")
+    return out_dir
+
+
+def write_dataset_atomically(out_dir: Path, files: dict[str, bytes], manifest: dict, overwrite: bool = False) -> Path:
+    """Write ``files`` (relative path → bytes) and a manifest listing their checksums into ``out_dir``."""
+    out_dir = check_out_dir(out_dir, overwrite)
     out_dir.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out_dir.parent / f".{out_dir.name}.tmp-{uuid.uuid4().hex[:8]}"
+    tmp = _hidden_sibling(out_dir, "tmp")
     try:
         tmp.mkdir()
         for rel, data in files.items():
@@ -57,9 +127,13 @@ def write_dataset_atomically(out_dir: Path, files: dict[str, bytes], manifest: d
         manifest = dict(manifest, schema_version=SCHEMA_VERSION, files={rel: sha256(d) for rel, d in sorted(files.items())})
         (tmp / MANIFEST).write_bytes(dumps_json(manifest))     # last: a folder without it never loads
         if out_dir.exists():
-            old = out_dir.parent / f".{out_dir.name}.old-{uuid.uuid4().hex[:8]}"
+            old = _hidden_sibling(out_dir, "old")
             os.rename(out_dir, old)
-            os.rename(tmp, out_dir)
+            try:
+                os.rename(tmp, out_dir)
+            except BaseException:
+                os.rename(old, out_dir)                        # put the previous dataset back
+                raise
             shutil.rmtree(old, ignore_errors=True)
         else:
             os.rename(tmp, out_dir)
@@ -74,6 +148,9 @@ def read_verified(root: Path) -> tuple[dict, dict[str, bytes]]:
     root = Path(root)
     hint = f"regenerate it with `python recipes/make_dataset.py dataset.out_dir={root}`"
     mpath = root / MANIFEST
+    recover_leftovers(root)
+    if root.exists() and not root.is_dir():
+        raise DatasetError(f"{root} is a file, not a dataset folder; pass the folder generate_dataset wrote")
     if not root.is_dir():
         raise DatasetError(f"no dataset at {root}: the folder does not exist; {hint}")
     if not mpath.is_file():

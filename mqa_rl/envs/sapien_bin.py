@@ -6,18 +6,19 @@ Task sheet
   poses at every reset (bit-identical physics; an in-place restore is not).
 * **Question**: sampled from the chosen split / difficulty levels / question types, or fixed with
   ``env.reset(question_id="scene_003/counting/can")`` (or a ``"reset_question"`` index into
-  ``MQADataset.questions`` in the reset tensordict, for batched and remote envs).
+  ``MQADataset.questions`` in the reset tensordict, for batched and remote envs; negative: random).
 * **Observation**: ``rgb`` uint8 [3, H, W], ``depth`` float32 [1, H, W] (metres), ``question`` int64
   tokens [L], and ``info`` measurements (see ``mqa_rl.keys``): object positions, visible area A_s,
   full projected area A_t, overlap χ, target mask, stop flag, executed push.
 * **Action**: ``Categorical(6273)``; see ``mqa_rl.envs.actions`` for the layout (8 directions × 28 ×
   28 cells, then stop). The observation ``action_mask`` marks the pushes that start over the bin
   floor (from the dataset's bin and camera geometry; fixed per env) and stop; masked pushes stay
-  legal to execute, policies simply never need them. A push starts at the surface point under the cell centre (from depth),
-  travels a quarter of the image width measured on the bin floor, then the finger lifts away and
+  legal to execute, policies simply never need them. A push starts at the surface point under the
+  cell centre (from depth), travels a quarter of the image width measured on the bin floor, then the finger lifts away and
   the scene settles (until every body sleeps or moves slower than ``settle_speed``, at most
   ``settle_steps``).
-* **Episode end**: stop → ``terminated``; ``max_pushes`` pushes → ``truncated``.
+* **Episode end**: stop → ``terminated``; ``max_pushes`` pushes → ``truncated``. A ``step`` after that
+  raises ``RuntimeError`` until ``reset()`` (TorchRL's rollouts and collectors reset on done).
 * **Reward**: always 0 here. The env measures; ``mqa_rl.transforms`` turn measurements into reward.
 
 >>> env = SapienBinEnv("data/mqa", split="train", question_types=["counting"])   # doctest: +SKIP
@@ -26,6 +27,8 @@ Task sheet
 """
 
 from __future__ import annotations
+
+import copy
 
 import numpy as np
 import torch
@@ -44,6 +47,15 @@ from mqa_rl.sim.silhouette import SilhouetteProjector
 from mqa_rl.transforms.functional import overlap_rate
 
 MAX_OBJECTS = 50
+
+
+def _one_integer(value, name: str, allowed: str) -> int:
+    """A one-element integer tensor as an int; a float (never truncated), bool or several values are refused."""
+    if not isinstance(value, torch.Tensor) or value.numel() != 1:
+        raise ValueError(f"{name} must be {allowed}; got {value!r}")
+    if value.dtype.is_floating_point or value.dtype.is_complex or value.dtype == torch.bool:
+        raise ValueError(f"{name} must be {allowed}; got dtype {value.dtype} ({value.item()})")
+    return int(value.item())
 
 
 class SapienBinEnv(EnvBase):
@@ -86,6 +98,7 @@ class SapienBinEnv(EnvBase):
         self.world: BinWorld | None = None
         self.question = None
         self.action_mask = actions.push_start_mask(self.dataset.bin, self.camera)
+        self._done = False
         self._make_specs()
 
     # ------------------------------------------------------------------------------------ specs
@@ -131,12 +144,19 @@ class SapienBinEnv(EnvBase):
                                  f"(see env.questions or MQADataset.questions)")
             return self.dataset.question(question_id)
         if tensordict is not None and keys.RESET_QUESTION in tensordict.keys():
-            idx = int(tensordict.get(keys.RESET_QUESTION).reshape(-1)[0])
+            idx = self._reset_index(tensordict.get(keys.RESET_QUESTION))
             if idx >= 0:
-                if idx >= len(self.dataset.questions):
-                    raise ValueError(f"{keys.RESET_QUESTION}={idx} outside [0, {len(self.dataset.questions)})")
                 return self.dataset.questions[idx]
         return self.questions[int(self._rng.integers(len(self.questions)))]
+
+    def _reset_index(self, value) -> int:
+        """The ``reset_question`` index: one integer (never a float to truncate), < the number of questions."""
+        n = len(self.dataset.questions)
+        allowed = f"one integer index into MQADataset.questions, in [0, {n}) (negative: a random question)"
+        idx = _one_integer(value, keys.RESET_QUESTION, allowed)
+        if idx >= n:
+            raise ValueError(f"{keys.RESET_QUESTION}={idx} outside [0, {n}): must be {allowed}")
+        return idx
 
     def _reset(self, tensordict: TensorDictBase | None = None, question_id: str | None = None, **kwargs) -> TensorDictBase:
         question = self._pick_question(tensordict, question_id)
@@ -148,6 +168,7 @@ class SapienBinEnv(EnvBase):
         self._projector = SilhouetteProjector([list(a.collision_parts) for a in assets], self.camera)
         self._target = np.array([a.class_name in question.classes for a in assets])
         self._push_count = 0
+        self._done = False
         tokens = torch.zeros(self.question_length, dtype=torch.int64)
         tokens[: len(question.tokens)] = torch.tensor(question.tokens)
         self._tokens = tokens
@@ -157,17 +178,14 @@ class SapienBinEnv(EnvBase):
 
     # ------------------------------------------------------------------------------------ step
     def _validate_action(self, tensordict: TensorDictBase) -> int:
-        a = tensordict.get(keys.ACTION, None)
-        allowed = f"an integer index in [0, {actions.NUM_ACTIONS}) (pushes 0…{actions.STOP - 1}, stop {actions.STOP})"
-        if not isinstance(a, torch.Tensor) or a.numel() != 1:
-            raise ValueError(f"action must be a single {allowed}; got {a!r}")
-        if a.dtype.is_floating_point or a.dtype.is_complex or a.dtype == torch.bool:
-            raise ValueError(f"action must be {allowed}; got dtype {a.dtype} ({a.item()})")
-        value = int(a.item())
-        if not 0 <= value < actions.NUM_ACTIONS:
-            raise ValueError(f"action {value} out of range: must be {allowed}")
         if self.world is None:
             raise RuntimeError("call reset() before step()")
+        if self._done:
+            raise RuntimeError("the episode is over (it stopped or reached max_pushes): call reset() before the next step()")
+        allowed = f"one integer index in [0, {actions.NUM_ACTIONS}) (pushes 0…{actions.STOP - 1}, stop {actions.STOP})"
+        value = _one_integer(tensordict.get(keys.ACTION, None), keys.ACTION, allowed)
+        if not 0 <= value < actions.NUM_ACTIONS:
+            raise ValueError(f"action {value} out of range: must be {allowed}")
         return value
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
@@ -184,6 +202,7 @@ class SapienBinEnv(EnvBase):
             out = self._observe(result)
             terminated = False
         truncated = (not terminated) and self._push_count >= self.max_pushes
+        self._done = terminated or truncated
         self._last = out
         out = out.clone(False)
         out.set(keys.REWARD, torch.zeros(1))
@@ -213,6 +232,32 @@ class SapienBinEnv(EnvBase):
         full = self._projector.areas(poses).astype(np.float32)
         overlap = overlap_rate(torch.from_numpy(visible), torch.from_numpy(full)).numpy()
         return {"rgb": rgb, "depth": depth, "seg": seg, "poses": poses, "visible": visible, "full": full, "overlap": overlap}
+
+    def ground_truth(self) -> dict:
+        """What only the simulator knows, for oracle references (never for learning): ``measure()``
+        plus every object's full silhouette mask [N, H, W], its segmentation id, the target mask and
+        the episode's question / scene ids and push count."""
+        if self.world is None:
+            raise RuntimeError("call reset() before ground_truth()")
+        m = self.measure()
+        m.update(masks=self._projector.masks(m["poses"]), entity_ids=self.world.entity_ids(), target=self._target.copy(),
+                 question_id=self.question.id, scene_id=self.question.scene_id, push_count=self._push_count)
+        return m
+
+    def preview(self, action: int) -> dict:
+        """``measure()`` of the scene after push ``action``, simulated on a copy rebuilt at the current
+        poses; the episode itself is untouched. For oracle references that plan by lookahead."""
+        if self.world is None:
+            raise RuntimeError("call reset() before preview()")
+        world, pusher = self.world, self.pusher
+        try:
+            self.world = build_world(world.assets, world.poses(), bin_spec=world.bin, camera=self.camera)
+            self.pusher = copy.copy(pusher)
+            self.pusher.attach(self.world)
+            self._execute_push(int(action))
+            return self.measure()
+        finally:
+            self.world, self.pusher = world, pusher
 
     def _observe(self, push: PushResult | None) -> TensorDict:
         m = self.measure()

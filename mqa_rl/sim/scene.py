@@ -198,6 +198,44 @@ def build_world(
     return world
 
 
+def add_sleeve(world: BinWorld, centre, inner_size: float, height: float, thickness: float = 0.01) -> list[sapien.Entity]:
+    """Four temporary kinematic walls around ``centre`` (xy): a square tube of ``inner_size`` standing
+    on the floor, into which scene generation pours objects before lifting it (``lift_sleeve``)."""
+    cx, cy = float(centre[0]), float(centre[1])
+    h, t = inner_size / 2, thickness
+    walls = []
+    for sx, sy in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+        half = [t / 2, h + t, height / 2] if sx else [h + t, t / 2, height / 2]
+        entity = sapien.Entity()
+        body = sapien.physx.PhysxRigidDynamicComponent()
+        shape = sapien.physx.PhysxCollisionShapeBox(np.asarray(half, np.float32), sapien.physx.PhysxMaterial(*OBJECT_MATERIAL))
+        shape.contact_offset = CONTACT_OFFSET
+        body.attach(shape)
+        body.kinematic = True
+        entity.add_component(body)
+        entity.pose = sapien.Pose(np.asarray([cx + sx * (h + t / 2), cy + sy * (h + t / 2), height / 2], np.float32))
+        world.scene.add_entity(entity)
+        walls.append(entity)
+    return walls
+
+
+def lift_sleeve(world: BinWorld, walls: list[sapien.Entity], speed: float, height: float) -> int:
+    """Raise the sleeve at ``speed`` (m/s) by ``height`` so the poured column slumps gradually into a
+    pile (as when a box is lifted off its contents), then remove it. Returns the physics steps."""
+    for b in world.bodies:
+        b.wake_up()
+    starts = [np.asarray(w.pose.p, np.float64) for w in walls]
+    n = max(int(np.ceil(height / (speed * TIMESTEP))), 1)
+    for k in range(1, n + 1):
+        for w, p in zip(walls, starts):
+            w.find_component_by_type(sapien.physx.PhysxRigidDynamicComponent).kinematic_target = \
+                sapien.Pose(np.asarray(p + [0, 0, height * k / n], np.float32))
+        world.scene.step()
+    for w in walls:
+        world.scene.remove_entity(w)
+    return n
+
+
 def add_object(world: BinWorld, asset: ObjectAsset, pose: np.ndarray) -> sapien.Entity:
     """Add one object to a built world (rendered when the world has a camera)."""
     entity, body = _object_entity(asset, pose, render=world.camera is not None)

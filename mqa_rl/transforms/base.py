@@ -6,6 +6,9 @@ collectors keep it, and written as 0 after a reset (there is no transition yet).
 works on a live env (``_step``) and on stored transitions, e.g. in a replay buffer's transforms
 (``forward``: reads root and ``"next"``, writes into ``"next"``), so a replay buffer can re-score
 stored data with another reward variant.
+
+Inputs are read with ``measured`` / ``required`` (``mqa_rl.transforms.checks``): a missing key names
+the term and the key; a NaN or inf in a slot that counts raises ``ValueError``; excluded slots are ignored.
 """
 
 from __future__ import annotations
@@ -14,6 +17,8 @@ import torch
 from tensordict import TensorDictBase
 from torchrl.data import Unbounded
 from torchrl.envs import Transform
+
+from mqa_rl.transforms.checks import finite_where, next_state, required
 
 
 class RewardTerm(Transform):
@@ -26,6 +31,10 @@ class RewardTerm(Transform):
 
     def compute(self, before: TensorDictBase, after: TensorDictBase) -> torch.Tensor:
         raise NotImplementedError
+
+    def measured(self, td: TensorDictBase, key, where: str, counted: torch.Tensor) -> torch.Tensor:
+        """``td[key]`` (``where``: "root" = before the action, "next" = after), finite where ``counted``."""
+        return finite_where(self, required(self, td, key, where), counted, key, where)
 
     def _write(self, before: TensorDictBase, after: TensorDictBase) -> TensorDictBase:
         value = self.compute(before, after)
@@ -41,7 +50,7 @@ class RewardTerm(Transform):
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         """On a stored transition (root = before, ``"next"`` = after)."""
-        self._write(tensordict, tensordict.get("next"))
+        self._write(tensordict, next_state(self, tensordict))
         return tensordict
 
     def _inv_call(self, tensordict: TensorDictBase) -> TensorDictBase:

@@ -6,6 +6,7 @@ import torch
 
 from mqa_rl import keys
 from mqa_rl.transforms.base import RewardTerm
+from mqa_rl.transforms.checks import finite_number
 from mqa_rl.transforms.functional import beta_schedule
 
 
@@ -25,13 +26,12 @@ class BetaSchedule(RewardTerm):
 
     def __init__(self, horizon: int, counter: torch.Tensor | None = None):
         super().__init__()
-        if horizon <= 0:
-            raise ValueError(f"the β horizon T (half the replay memory) must be positive, got {horizon}")
+        horizon = finite_number(self, "horizon T (half the replay memory)", horizon, positive=True)
         if counter is None:
             counter = torch.zeros((), dtype=torch.int64)
-        if counter.dtype != torch.int64 or counter.numel() != 1:
-            raise ValueError(f"the step counter must be an int64 scalar tensor, got {counter.dtype} {tuple(counter.shape)}")
-        self.horizon = int(horizon)
+        if not isinstance(counter, torch.Tensor) or counter.dtype != torch.int64 or counter.numel() != 1:
+            raise ValueError(f"BetaSchedule: the step counter must be an int64 scalar tensor, got {counter!r}")
+        self.horizon = int(horizon) if horizon.is_integer() else horizon
         self.register_buffer("train_steps", counter)
 
     def set_train_steps(self, steps: int) -> None:

@@ -6,6 +6,7 @@ import torch
 
 from mqa_rl import keys
 from mqa_rl.transforms.base import RewardTerm
+from mqa_rl.transforms.checks import finite_number, required
 from mqa_rl.transforms.functional import EXPLORATION_CAP, exploration_reward
 
 SCALES = ("push_length", "position_norm")
@@ -19,6 +20,7 @@ class ExplorationReward(RewardTerm):
     ``scale="position_norm"`` is the paper's printed s_i = |p_i|, which depends on the origin (here
     the bin centre, so objects near the centre earn huge ratios; kept for reproduction studies).
     Ratios ≥ ``cap`` are treated as non-physical jumps and ignored (``cap=None`` keeps all).
+    Positions of real objects (``object_mask``) must be finite; padding slots are ignored.
     """
 
     out_key = keys.EXPLORATION
@@ -27,13 +29,13 @@ class ExplorationReward(RewardTerm):
         super().__init__()
         if scale not in SCALES:
             raise ValueError(f"unknown exploration scale {scale!r}; allowed: {SCALES}")
-        if push_length <= 0:
-            raise ValueError(f"push_length must be positive, got {push_length}")
-        self.push_length = float(push_length)
+        self.push_length = finite_number(self, "push_length", push_length, positive=True)
         self.scale = scale
-        self.cap = cap
+        self.cap = None if cap is None else finite_number(self, "cap (None keeps every ratio)", cap, positive=True)
 
     def compute(self, before, after) -> torch.Tensor:
-        p0, p1 = before.get(keys.OBJECT_POS), after.get(keys.OBJECT_POS)
+        mask = required(self, before, keys.OBJECT_MASK, "root")
+        p0 = self.measured(before, keys.OBJECT_POS, "root", mask)
+        p1 = self.measured(after, keys.OBJECT_POS, "next", mask)
         s = self.push_length if self.scale == "push_length" else p0.norm(dim=-1)
-        return exploration_reward(p0, p1, before.get(keys.OBJECT_MASK), s, self.cap)
+        return exploration_reward(p0, p1, mask, s, self.cap)

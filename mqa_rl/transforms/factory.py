@@ -14,6 +14,7 @@ be named in ``terms`` and ``question_weights`` without touching the library.
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Mapping
 
 import torch
@@ -51,6 +52,25 @@ def _plain(cfg):
     return cfg
 
 
+def _mapping(value, what: str) -> dict:
+    if value is None:
+        return {}
+    if not isinstance(value, Mapping):
+        raise ValueError(f"reward config: {what} must be a mapping, got {value!r}")
+    return dict(value)
+
+
+def _make_term(name: str, kwargs) -> RewardTerm:
+    """``TERM_REGISTRY[name](**kwargs)``; a keyword the term does not take is refused naming the term."""
+    cls = TERM_REGISTRY[name]
+    try:
+        inspect.signature(cls).bind(**kwargs)
+    except TypeError as e:
+        params = [p for p in inspect.signature(cls).parameters if p not in ("self", "args", "kwargs")]
+        raise ValueError(f"reward term {name!r} ({cls.__name__}): {e}; it takes {params}") from None
+    return cls(**kwargs)
+
+
 def make_reward_transform(cfg: Mapping, *, push_length: float, counter: torch.Tensor | None = None) -> Compose:
     """Terms, simple-scene flag, β and ``MQAReward`` as one ``Compose`` for ``TransformedEnv``."""
     cfg = dict(_plain(cfg))
@@ -59,9 +79,9 @@ def make_reward_transform(cfg: Mapping, *, push_length: float, counter: torch.Te
     unknown = set(cfg) - allowed
     if unknown:
         raise ValueError(f"unknown reward config keys {sorted(unknown)}; allowed: {sorted(allowed)}")
-    terms = dict(cfg.get("terms") or {})
+    terms = _mapping(cfg.get("terms"), "terms")
     terms.setdefault("exploration", {})
-    weights = dict(cfg.get("question_weights") or {})
+    weights = _mapping(cfg.get("question_weights"), "question_weights")
     missing = set(weights) - set(terms)
     if missing:
         raise ValueError(f"question_weights names terms {sorted(missing)} that are not in 'terms' ({sorted(terms)})")
@@ -69,10 +89,10 @@ def make_reward_transform(cfg: Mapping, *, push_length: float, counter: torch.Te
     for name, kwargs in terms.items():
         if name not in TERM_REGISTRY:
             raise ValueError(f"unknown reward term {name!r}; registered: {sorted(TERM_REGISTRY)}")
-        kwargs = dict(kwargs or {})
+        kwargs = _mapping(kwargs, f"terms.{name}")
         if TERM_REGISTRY[name] is ExplorationReward:
             kwargs.setdefault("push_length", push_length)
-        transforms.append(TERM_REGISTRY[name](**kwargs))
+        transforms.append(_make_term(name, kwargs))
     transforms.append(SimpleSceneFlag(cfg.get("simple_threshold", 0.2)))
     transforms.append(BetaSchedule(cfg.get("beta_horizon", 2000), counter))
     transforms.append(MQAReward(

@@ -2,7 +2,9 @@
 
 Objects live on the last dimension ([..., K]); ``mask`` / ``target_mask`` select the real objects
 (the env pads to 50) or the question's targets. Degenerate cases give 0, never NaN or inf: no
-target, or nothing left to reveal (a zero denominator).
+target, or nothing left to reveal (a zero denominator). Slots a mask excludes never influence the
+result, whatever they hold (NaN included); the selected slots must be finite, which the transforms
+check (``mqa_rl.transforms.checks``) before calling these.
 """
 
 from __future__ import annotations
@@ -53,10 +55,11 @@ def global_occlusion_reward(chi_before: torch.Tensor, chi_after: torch.Tensor, t
 
     0 when m = 0 or χ_a = 0. R_g ≤ 1 (χ' ≥ 0); it is negative when the targets got more hidden.
     """
-    t = target_mask.to(chi_before.dtype)
-    m = t.sum(-1)
-    mean_before = (chi_before * t).sum(-1) / m.clamp(min=1)
-    mean_after = (chi_after * t).sum(-1) / m.clamp(min=1)
+    t = target_mask.bool()
+    m = t.sum(-1).to(chi_before.dtype)
+    zero = torch.zeros_like(chi_before)
+    mean_before = torch.where(t, chi_before, zero).sum(-1) / m.clamp(min=1)     # where, not ·mask: NaN · 0 is NaN
+    mean_after = torch.where(t, chi_after, zero).sum(-1) / m.clamp(min=1)
     return torch.where(m > 0, _relative_drop(mean_before, mean_after), torch.zeros_like(m))
 
 

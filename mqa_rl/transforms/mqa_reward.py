@@ -6,10 +6,14 @@
     push,  cluttered      → β · R_e + (1 − β) · R_q,   R_q = Σ_k w_k · term_k
 
 "Simple" is judged on the scene before the action (``SimpleSceneFlag``), R_e, β and the R_q terms
-are read from ``"reward_terms"``: put their transforms before this one.
+are read from ``"reward_terms"``: put their transforms before this one. The flag must be finite on
+every step; R_e, β and the weighted terms only where they are used (a push in a cluttered scene):
+elsewhere they may hold anything. A non-finite value that counts raises ``ValueError``.
 """
 
 from __future__ import annotations
+
+from collections.abc import Mapping
 
 import torch
 from tensordict import TensorDictBase
@@ -17,6 +21,9 @@ from torchrl.data import Unbounded
 from torchrl.envs import Transform
 
 from mqa_rl import keys
+from mqa_rl.transforms.checks import finite_number, finite_where, next_state, required
+
+ADD_THE_TERM = "add its transform before MQAReward (make_reward_transform does)"
 
 
 class MQAReward(Transform):
@@ -28,32 +35,39 @@ class MQAReward(Transform):
         early_stop_penalty: float = -1.0,
         redundant_push_reward: float = 0.0,
     ):
-        if not question_weights:
-            raise ValueError("question_weights is empty: name at least one term, e.g. {'local_occlusion': 1.0}")
-        self.question_weights = {str(k): float(v) for k, v in question_weights.items()}
+        if not isinstance(question_weights, Mapping) or not question_weights:
+            raise ValueError(f"MQAReward: question_weights must name at least one term with its weight, e.g. "
+                             f"{{'local_occlusion': 1.0}}; got {question_weights!r}")
+        self.question_weights = {str(k): finite_number(self, f"question_weights[{k!r}]", v) for k, v in question_weights.items()}
         self._term_keys = [(keys.REWARD_TERMS, k) for k in self.question_weights]
         super().__init__(in_keys=[keys.EXPLORATION, keys.BETA, keys.SIMPLE_SCENE, keys.IS_STOP, *self._term_keys],
                          out_keys=[keys.REWARD])
-        self.stop_reward = float(stop_reward)
-        self.early_stop_penalty = float(early_stop_penalty)
-        self.redundant_push_reward = float(redundant_push_reward)
+        self.stop_reward = finite_number(self, "stop_reward", stop_reward)
+        self.early_stop_penalty = finite_number(self, "early_stop_penalty", early_stop_penalty)
+        self.redundant_push_reward = finite_number(self, "redundant_push_reward", redundant_push_reward)
 
-    def question_reward(self, after: TensorDictBase) -> torch.Tensor:
-        """R_q = Σ_k w_k · term_k, [..., 1]."""
+    def _used(self, after: TensorDictBase, key, counted: torch.Tensor) -> torch.Tensor:
+        """A term, finite where ``counted``; where not, 0 (so a NaN there cannot leak through w · term)."""
+        value = finite_where(self, required(self, after, key, "next", ADD_THE_TERM), counted, key, "next")
+        return torch.where(counted, value, torch.zeros_like(value))
+
+    def question_reward(self, after: TensorDictBase, counted: torch.Tensor | None = None) -> torch.Tensor:
+        """R_q = Σ_k w_k · term_k, [..., 1] (``counted``: the steps it is used for; default all)."""
+        if counted is None:
+            counted = torch.ones(*after.batch_size, 1, dtype=torch.bool, device=after.device)
         total = None
         for (key, w) in zip(self._term_keys, self.question_weights.values()):
-            if key not in after.keys(True):
-                raise KeyError(f"reward term {key[1]!r} is missing: add its transform before MQAReward "
-                               f"(terms present: {sorted(after.get(keys.REWARD_TERMS).keys())})")
-            term = w * after.get(key)
+            term = w * self._used(after, key, counted)
             total = term if total is None else total + term
         return total
 
     def reward(self, after: TensorDictBase) -> torch.Tensor:
-        beta = after.get(keys.BETA)
-        push = beta * after.get(keys.EXPLORATION) + (1 - beta) * self.question_reward(after)
-        simple = after.get(keys.SIMPLE_SCENE) > 0.5
-        stop = after.get(keys.IS_STOP)
+        simple = finite_where(self, required(self, after, keys.SIMPLE_SCENE, "next", ADD_THE_TERM), None,
+                              keys.SIMPLE_SCENE, "next") > 0.5
+        stop = required(self, after, keys.IS_STOP, "next").bool()
+        used = ~stop & ~simple
+        beta = self._used(after, keys.BETA, used)
+        push = beta * self._used(after, keys.EXPLORATION, used) + (1 - beta) * self.question_reward(after, used)
         stop_r = torch.where(simple, torch.full_like(push, self.stop_reward), torch.full_like(push, self.early_stop_penalty))
         push_r = torch.where(simple, torch.full_like(push, self.redundant_push_reward), push)
         return torch.where(stop, stop_r, push_r)
@@ -64,7 +78,7 @@ class MQAReward(Transform):
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         """On a stored transition: rewrites ``("next", "reward")`` from the stored terms."""
-        nxt = tensordict.get("next")
+        nxt = next_state(self, tensordict)
         nxt.set(keys.REWARD, self.reward(nxt))
         return tensordict
 

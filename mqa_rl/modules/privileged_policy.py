@@ -1,0 +1,122 @@
+"""An ORACLE reference policy: it reads the simulator's ground truth, which no real robot has.
+
+It answers "what can manipulation reveal at all on these scenes?": the upper reference row of the
+answering table, next to the random baseline and the learned policies. It is never used to train
+anything. Each step it looks at the question's target objects; while one of them is not
+*revealed* (fewer than ``min_visible_px`` visible pixels, or less than ``min_visible_fraction`` of
+its full silhouette), it takes the least visible one, finds the object covering most of that
+target's full silhouette in the segmentation, and pushes that occluder straight away from the
+target: the push starts just behind the occluder's visible part on the target's side and runs
+through it. When every target is revealed (or nothing covers the hidden ones, or every
+occluder was already pushed ``max_tries_per_occluder`` times without success) it stops.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+from tensordict import TensorDictBase
+
+from mqa_rl import keys
+from mqa_rl.envs import actions
+
+
+class PrivilegedPushPolicy:
+    """Oracle push policy bound to one ``SapienBinEnv`` (it reads ``env.ground_truth()``).
+
+    Call it on the env's current tensordict: ``td = policy(td)`` writes ``action``. Not a learned
+    module and not picklable into collector workers on purpose: it needs the live simulator.
+    """
+
+    def __init__(self, env, min_visible_px: int = 20, min_visible_fraction: float = 0.3,
+                 max_tries_per_occluder: int = 2, finger_gap_px: float = 3.0, lookahead: int = 6):
+        self.env = env
+        self.min_visible_px = min_visible_px
+        self.min_visible_fraction = min_visible_fraction
+        self.max_tries_per_occluder = max_tries_per_occluder
+        self.finger_gap_px = finger_gap_px
+        self.lookahead = lookahead
+        self._tries: dict[tuple[int, int], int] = {}
+        self._episode = None
+
+    def revealed(self, visible: np.ndarray, full: np.ndarray) -> np.ndarray:
+        """Which objects count as seen: enough visible pixels and enough of their silhouette."""
+        frac = np.divide(visible, full, out=np.zeros_like(visible, dtype=np.float64), where=full > 0)
+        return (visible >= self.min_visible_px) & (frac >= self.min_visible_fraction)
+
+    def choose(self) -> int:
+        """The action for the env's current state (a push index or ``actions.STOP``)."""
+        gt = self.env.ground_truth()
+        key = (gt["question_id"], gt["scene_id"])
+        if key != self._episode or int(gt["push_count"]) == 0:
+            self._episode, self._tries = key, {}
+        candidates = self.candidates(gt)
+        if not candidates:
+            return actions.STOP
+        if self.lookahead <= 1 or len(candidates) == 1:
+            best = candidates[0]
+        else:
+            scores = [self.score(self.env.preview(a[0]), gt["target"]) for a in candidates[: self.lookahead]]
+            best = candidates[int(np.argmax(scores))]
+        action, pair = best
+        self._tries[pair] = self._tries.get(pair, 0) + 1
+        return action
+
+    def score(self, m: dict, target: np.ndarray) -> float:
+        """How well the targets can be seen: revealed targets, then their mean visible fraction."""
+        vis, full = m["visible"][target], m["full"][target]
+        frac = np.clip(np.divide(vis, np.maximum(full, 1)), 0, 1)
+        return float(self.revealed(vis, full).sum() + frac.mean())
+
+    def candidates(self, gt: dict) -> list[tuple[int, tuple[int, int]]]:
+        """Pushes worth trying, best guess first: for each unrevealed target (least visible first),
+        each object covering it (most pixels first), pushed straight away from it and ±45°."""
+        seg, masks, ids = gt["seg"], gt["masks"], gt["entity_ids"]
+        targets = np.flatnonzero(gt["target"] & ~self.revealed(gt["visible"], gt["full"]))
+        order = targets[np.argsort(gt["visible"][targets] / np.maximum(gt["full"][targets], 1))]
+        out, seen = [], set()
+        for t in order:
+            covered = seg[masks[t]]
+            counts = {j: int((covered == ids[j]).sum()) for j in range(len(ids)) if j != t}
+            for j in sorted((j for j, n in counts.items() if n > 0), key=lambda j: -counts[j]):
+                if self._tries.get((int(t), j), 0) >= self.max_tries_per_occluder:
+                    continue
+                for turn in (0, 1, -1):
+                    a = self._push_away(masks[t], seg == ids[j], masks[j], seg.shape, turn)
+                    if a not in seen:
+                        seen.add(a)
+                        out.append((a, (int(t), j)))
+        return out
+
+    def _push_away(self, target_mask: np.ndarray, occluder_visible: np.ndarray, occluder_full: np.ndarray,
+                   shape: tuple[int, int], turn: int = 0) -> int:
+        h, w = shape
+        c_t = _centroid(target_mask)
+        c_o = _centroid(occluder_full)
+        v = c_o - c_t
+        if np.linalg.norm(v) < 2.0:                 # occluder centred on the target: push it outwards
+            v = c_o - np.array([w / 2, h / 2])
+        if np.linalg.norm(v) < 1e-6:
+            v = np.array([1.0, 0.0])
+        # image (u right, v down); direction d = d·45°, counter-clockwise as seen in the image
+        d = (int(round(math.degrees(math.atan2(-v[1], v[0])) / 45.0)) + turn) % actions.DIRECTIONS
+        theta = math.radians(45.0 * d)
+        unit = np.array([math.cos(theta), -math.sin(theta)])
+        rows, cols = np.nonzero(occluder_visible)
+        pts = np.stack([cols + 0.5, rows + 0.5], axis=1)
+        trailing = float(((pts - c_o) @ unit).min())
+        start = c_o + (trailing - self.finger_gap_px) * unit
+        col = int(np.clip(start[0] * actions.GRID / w, 0, actions.GRID - 1))
+        row = int(np.clip(start[1] * actions.GRID / h, 0, actions.GRID - 1))
+        return actions.encode(d, row, col)
+
+    def __call__(self, tensordict: TensorDictBase) -> TensorDictBase:
+        tensordict.set(keys.ACTION, torch.tensor(self.choose(), dtype=torch.int64))
+        return tensordict
+
+
+def _centroid(mask: np.ndarray) -> np.ndarray:
+    rows, cols = np.nonzero(mask)
+    return np.array([cols.mean() + 0.5, rows.mean() + 0.5])
