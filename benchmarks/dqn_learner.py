@@ -27,6 +27,7 @@ import time
 import warnings
 from pathlib import Path
 
+import numpy as np
 import torch
 from omegaconf import OmegaConf
 from tensordict import TensorDict
@@ -48,7 +49,7 @@ MODELS["light_full_res"] = {**MODELS["light"], "light_downsample": 1}           
 
 
 def fake_transitions(n: int, gen: torch.Generator) -> TensorDict:
-    mask = actions.push_start_mask(BinSpec(), CameraSpec())
+    mask = actions.push_start_mask(BinSpec(), CameraSpec(), np.full((SIZE, SIZE), CameraSpec().distance))
     allowed = mask.nonzero().squeeze(-1)
 
     def obs():

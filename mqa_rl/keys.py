@@ -9,7 +9,7 @@ RGB = "rgb"                                   # uint8 [3, H, W]
 DEPTH = "depth"                               # float32 [1, H, W], metres along the view axis
 QUESTION = "question"                         # int64 [L], question tokens, 0-padded
 ACTION = "action"                             # int64 [], push index or STOP
-ACTION_MASK = "action_mask"                   # bool [NUM_ACTIONS] pushes starting inside the bin, and stop
+ACTION_MASK = "action_mask"                   # bool [NUM_ACTIONS] pushes whose start (from depth) is inside the bin, and stop
 RESET_QUESTION = "reset_question"             # optional int64 [1] in a reset tensordict: a question index
 REWARD = "reward"
 

@@ -1,6 +1,7 @@
 """DQN loss and prioritized replay on push-Q-network batches: learning moves the TD error, updates
 move the priorities, the replay stores compact transitions."""
 
+import numpy as np
 import pytest
 import torch
 from tensordict import TensorDict
@@ -23,7 +24,7 @@ SMALL_NET = {"trunk": "light", "light_channels": [8, 8, 16, 16], "fuse_channels"
 def transitions(n: int, seed: int = 0) -> TensorDict:
     """Collected-like transitions (with info, which the replay drops)."""
     g = torch.Generator().manual_seed(seed)
-    mask = actions.push_start_mask(BinSpec(), CameraSpec())
+    mask = actions.push_start_mask(BinSpec(), CameraSpec(), np.full((S, S), CameraSpec().distance))
     allowed = mask.nonzero().squeeze(-1)
 
     def obs():

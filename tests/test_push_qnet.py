@@ -98,25 +98,37 @@ def test_env_executes_the_push_of_the_flat_index(small_dataset):
         assert np.dot(move / np.linalg.norm(move), actions.direction_xy(d)) > 0.99
 
 
-def test_action_mask_follows_the_bin_geometry(small_dataset):
+def _empty_bin_depth(camera):
+    return np.full((camera.height, camera.width), camera.distance)    # the floor everywhere
+
+
+def test_action_mask_allows_pushes_starting_inside_the_bin(small_dataset):
     from mqa_rl.envs.sapien_bin import SapienBinEnv
 
-    env = SapienBinEnv(small_dataset, split=None, seed=0)
-    mask = env.reset()[keys.ACTION_MASK]
-    assert mask.dtype == torch.bool and mask.shape == (actions.NUM_ACTIONS,) and mask[actions.STOP]
+    env = SapienBinEnv(small_dataset, split=None, difficulties=["hard"], seed=0)
+    td = env.reset()
+    mask = td[keys.ACTION_MASK]
     spec = env.observation_spec[keys.ACTION_MASK]                     # declared in the specs
-    assert spec.shape == mask.shape and spec.dtype == torch.bool and spec.is_in(mask)
+    assert spec.shape == mask.shape and spec.dtype == torch.bool and spec.is_in(mask) and mask[actions.STOP]
     cells = mask[: actions.GRID ** 2].view(actions.GRID, actions.GRID)
-    for d in range(actions.DIRECTIONS):                    # the same cells for every direction
+    for d in range(actions.DIRECTIONS):                                # the same cells for every direction
         assert torch.equal(mask[d * 784:(d + 1) * 784].view(28, 28), cells)
-    for r in range(actions.GRID):
-        for c in range(actions.GRID):
-            uv = actions.cell_centre_uv(r, c, env.camera.height, env.camera.width)
-            floor = env.camera.unproject(uv, np.float64(env.camera.distance))
-            assert bool(cells[r, c]) == bool(env.dataset.bin.inside(floor[None])[0])
-    assert 0.15 < 1 - cells.float().mean().item() < 0.45
-    wider = actions.push_start_mask(BinSpec(inner_size=0.46), CameraSpec())   # follows another geometry
-    assert wider[:784].sum() > cells.sum()
+    start = actions.push_start_points(td[keys.DEPTH][0].numpy(), env.camera)
+    b = env.dataset.bin
+    inside = (np.abs(start[..., 0]) <= b.half - 0.005) & (np.abs(start[..., 1]) <= b.half - 0.005)
+    assert np.array_equal(cells.numpy(), inside)
+    assert 0.05 < 1 - cells.float().mean().item() < 0.7
+    # the env pushes from exactly that start point (the pusher keeps its finger 12 mm off the walls)
+    interior = (np.abs(start[..., :2]) <= b.half - 0.02).all(-1)
+    r, c = map(int, np.argwhere(interior & (start[..., 2] > 0.01))[0])  # an allowed cell on an object
+    nxt = env.step(td.set(keys.ACTION, torch.tensor(actions.encode(0, r, c))))["next"]
+    assert np.allclose(nxt[keys.PUSH_START].numpy()[:2], start[r, c, :2], atol=2e-3)
+    # after the push the mask follows the new depth image
+    assert torch.equal(nxt[keys.ACTION_MASK], actions.push_start_mask(b, env.camera, nxt[keys.DEPTH][0].numpy()))
+    # another bin size, another mask (an empty bin: the floor everywhere)
+    small = actions.push_start_mask(BinSpec(inner_size=0.30), env.camera, _empty_bin_depth(env.camera))
+    large = actions.push_start_mask(BinSpec(inner_size=0.40), env.camera, _empty_bin_depth(env.camera))
+    assert small[:784].sum() < large[:784].sum() and not (small & ~large).any()
 
 
 def test_masked_actions_are_never_chosen():
@@ -129,7 +141,7 @@ def test_masked_actions_are_never_chosen():
         net.head[-1][-1].bias.fill_(0.0)
     explorer = make_explorer(actor, spec, eps_init=1.0, eps_end=1.0, annealing_frames=1)
     rgb, depth, q = _obs((64,))
-    geometry = actions.push_start_mask(BinSpec(), CameraSpec())
+    geometry = actions.push_start_mask(BinSpec(), CameraSpec(), _empty_bin_depth(CameraSpec()))
     for mask in (geometry, torch.zeros(actions.NUM_ACTIONS, dtype=torch.bool).index_fill_(0, torch.tensor([5, 900, 6272]), True)):
         from tensordict import TensorDict
 
