@@ -9,6 +9,7 @@ RGB = "rgb"                                   # uint8 [3, H, W]
 DEPTH = "depth"                               # float32 [1, H, W], metres along the view axis
 QUESTION = "question"                         # int64 [L], question tokens, 0-padded
 ACTION = "action"                             # int64 [], push index or STOP
+ACTION_MASK = "action_mask"                   # bool [NUM_ACTIONS] pushes whose start (from depth) is inside the bin, and stop
 RESET_QUESTION = "reset_question"             # optional int64 [1] in a reset tensordict: a question index
 REWARD = "reward"
 
@@ -39,3 +40,14 @@ GLOBAL_OCCLUSION = (REWARD_TERMS, "global_occlusion")  # R_g
 LOCAL_OCCLUSION = (REWARD_TERMS, "local_occlusion")    # R_l
 SIMPLE_SCENE = (REWARD_TERMS, "simple_scene")          # 1.0 when the scene before the action was simple
 BETA = (REWARD_TERMS, "beta")                          # β used for this step
+
+# written by the Q-network policy (mqa_rl.modules), read by the DQN loss and the logs
+ACTION_VALUE = "action_value"                 # float32 [NUM_ACTIONS] Q(s, ·), masked actions at the dtype's min
+CHOSEN_ACTION_VALUE = "chosen_action_value"   # float32 [1] Q(s, a) of the chosen action
+TD_ERROR = "td_error"                         # float32 [1] squared TD error, the replay priority
+
+# running episode statistics (mqa_rl.transforms.episode_stats), observations read at episode ends
+EPISODE = "episode"
+EPISODE_REWARD = (EPISODE, "reward")                   # float32 [1] sum of rewards so far
+EPISODE_TERMS = (EPISODE, "terms")                     # float32 [1] each: sums of the reward terms so far
+TARGET_CHI_START = (EPISODE, "target_chi_start")       # float32 [1] mean target χ at reset (0 without target)

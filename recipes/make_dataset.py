@@ -40,6 +40,7 @@ def main(cfg: DictConfig) -> None:
             num_scenes=OmegaConf.to_container(d.num_scenes),
             library=d.library,
             train_fraction=d.train_fraction,
+            bin_spec=OmegaConf.to_container(d.bin),
             overwrite=d.overwrite,
             progress=True,
         )

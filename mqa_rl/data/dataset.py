@@ -8,6 +8,7 @@
 from __future__ import annotations
 
 import json
+import math
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,7 +21,7 @@ from mqa_rl.data.arguments import scene_plan, seed_and_fraction
 from mqa_rl.data.storage import DatasetError, check_out_dir, dumps_json, read_verified, write_dataset_atomically
 from mqa_rl.data.vocab import ANSWERS, Vocabulary
 from mqa_rl.sim.assets import ObjectAsset
-from mqa_rl.sim.geometry import BinSpec, CameraSpec
+from mqa_rl.sim.geometry import BinSpec, CameraSpec, framing_fovy
 
 DEFAULT_NUM_SCENES = {"easy": 30, "medium": 30, "hard": 40}
 LEVELS = tuple(DEFAULT_NUM_SCENES)                               # difficulty levels, easiest first
@@ -70,6 +71,24 @@ def _library(library) -> tuple[list[ObjectAsset], dict[str, tuple[str, str]]]:
     return assets, {a.class_name: _phrases_for(a.class_name) for a in assets}
 
 
+def _bin(bin_spec) -> BinSpec:
+    """A valid ``BinSpec`` (default when None); a mapping of its fields is accepted too (configs)."""
+    if bin_spec is None:
+        return BinSpec()
+    if isinstance(bin_spec, dict):
+        unknown = set(bin_spec) - {"inner_size", "wall_height", "wall_thickness"}
+        if unknown:
+            raise ValueError(f"unknown bin field(s) {sorted(unknown)}; allowed: inner_size, wall_height, wall_thickness")
+        bin_spec = BinSpec(**bin_spec)
+    values = (bin_spec.inner_size, bin_spec.wall_height, bin_spec.wall_thickness)
+    if not all(isinstance(v, (int, float)) and math.isfinite(v) and v > 0 for v in values):
+        raise ValueError(f"bin sizes must be positive finite metres, got {bin_spec}")
+    if bin_spec.inner_size < 0.2 or bin_spec.wall_height < 0.1:
+        raise ValueError(f"a bin of {bin_spec.inner_size} m with {bin_spec.wall_height} m walls cannot hold the "
+                         "scenes' 20-50 real-size objects; use inner_size ≥ 0.2 and wall_height ≥ 0.1")
+    return bin_spec
+
+
 def _split(rng: np.random.Generator, n: int, train_fraction: float) -> list[str]:
     order = rng.permutation(n)
     n_train = int(round(train_fraction * n))
@@ -87,6 +106,7 @@ def generate_dataset(
     library=None,
     train_fraction: float = 0.7,
     objects_per_scene: dict[str, int] | None = None,
+    bin_spec: BinSpec | None = None,
     overwrite: bool = False,
     progress: bool = False,
 ) -> "MQADataset":
@@ -96,7 +116,8 @@ def generate_dataset(
     the split is by scene, stratified by difficulty. ``library`` is None (the 60 procedural objects),
     a folder of user meshes ``<class>/<instance>/*.obj``, or a list of ``ObjectAsset``.
     ``objects_per_scene`` overrides the paper's object counts per level (for sparser or denser
-    scenes). Everything derives from ``seed``: the same seed gives the same files, byte for byte.
+    scenes). ``bin_spec`` changes the bin (default: 40 × 40 cm, 45 cm walls); the camera is framed
+    on its rim. Everything derives from ``seed``: the same seed gives the same files, byte for byte.
     """
     from mqa_rl.data.scenes import DIFFICULTIES, drop_config, settle_scene
     from mqa_rl.data.stats import answer_statistics
@@ -105,6 +126,7 @@ def generate_dataset(
     num_scenes, per_level = scene_plan(DEFAULT_NUM_SCENES if num_scenes is None else num_scenes,
                                        objects_per_scene, DIFFICULTIES)
     seed, train_fraction = seed_and_fraction(seed, train_fraction)
+    bin_spec = _bin(bin_spec)
     check_out_dir(out_dir, overwrite)                     # before the work, not after it
     assets, phrases = _library(library)
     names = [a.name for a in assets]
@@ -118,7 +140,7 @@ def generate_dataset(
         if count and not 1 <= per_level[level] <= len(assets):
             raise ValueError(f"{level} scenes need {per_level[level]} objects; the library has {len(assets)}")
 
-    bin_spec, camera = BinSpec(), CameraSpec()
+    camera = CameraSpec(fovy_deg=framing_fovy(bin_spec))
     plan = [(level, i) for level in DIFFICULTIES for i in range(num_scenes.get(level, 0))]
     split_of = {}
     for k, level in enumerate(DIFFICULTIES):

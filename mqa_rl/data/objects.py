@@ -1,8 +1,8 @@
 """Procedural library of household objects for the bin scenes.
 
-The paper fills a 40 x 40 cm bin with up to 50 everyday objects and asks questions
-about them ("How many cans are there in the bin?").  Instead of relying on scanned
-assets we build every object from a handful of ``trimesh.creation``-style primitives:
+The paper fills a bin with up to 50 everyday objects and asks questions about them
+("How many cans are there in the bin?").  Instead of relying on scanned assets we build
+every object from a handful of ``trimesh.creation``-style primitives:
 
 * Every object is a union of *convex* parts.  Each part is used both as the visual
   mesh and as a convex collision shape, so what the camera sees is exactly what the
@@ -12,8 +12,10 @@ assets we build every object from a handful of ``trimesh.creation``-style primit
 * Everything is deterministic: each of the ``INSTANCES_PER_CLASS`` instances of a
   class comes from an explicit row of a parameter table below.  Instances of a class
   share a recognisable shape and differ in size, proportions and colour.
-* Objects are modelled lying in their natural resting pose, z up, in metres, and are
-  re-centred so that the origin is the centre of their axis-aligned bounding box.
+* Objects are modelled lying in their natural resting pose, z up, in metres, are
+  re-centred so that the origin is the centre of their axis-aligned bounding box, and
+  are scaled to real-world size (``mqa_rl.data.object_sizes``: the builders fix shape
+  and proportions, the size table the longest side, with the product it comes from).
 
 Only ``numpy`` and ``trimesh`` are used so that dataset tooling can import this module
 without a simulator.

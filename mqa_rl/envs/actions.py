@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import torch
 
 GRID = 28
 DIRECTIONS = 8
@@ -43,3 +44,29 @@ def direction_xy(direction: int) -> np.ndarray:
 def cell_centre_uv(row: int, col: int, height: int, width: int) -> np.ndarray:
     """Continuous image coordinates (u, v) of grid cell (row, col)'s centre."""
     return np.array([(col + 0.5) * width / GRID, (row + 0.5) * height / GRID])
+
+
+def push_start_points(depth: np.ndarray, camera) -> np.ndarray:
+    """World start point [GRID, GRID, 3] of the push from every cell, as ``SapienBinEnv`` computes it:
+    the surface under the cell centre's pixel (from the depth image, metres along the view axis),
+    the floor where the depth is empty."""
+    h, w = depth.shape[-2:]
+    rows, cols = np.meshgrid(np.arange(GRID), np.arange(GRID), indexing="ij")
+    uv = np.stack([(cols + 0.5) * w / GRID, (rows + 0.5) * h / GRID], axis=-1)
+    z = depth[np.minimum(uv[..., 1].astype(int), h - 1), np.minimum(uv[..., 0].astype(int), w - 1)].astype(np.float64)
+    z = np.where(z > 0, z, camera.distance)
+    return camera.unproject(uv, z)
+
+
+def push_start_mask(bin_spec, camera, depth: np.ndarray, margin: float = 0.005) -> torch.Tensor:
+    """bool [NUM_ACTIONS]: True for pushes that start inside the bin, and for stop.
+
+    A push starts at the surface point under its cell (``push_start_points``); it is allowed when
+    that point lies inside the inner walls shrunk by ``margin`` (so not on a wall face, the rim or
+    outside the bin). Pile tops next to a wall are allowed, the wall beside them is not. Derived from
+    the bin, the camera and the current depth image only, so it follows whatever geometry the
+    dataset has. The same cells are allowed in every direction; stop is always allowed.
+    """
+    start = push_start_points(depth, camera)
+    inside = torch.from_numpy(bin_spec.inside(start, margin=margin).reshape(-1))
+    return torch.cat([inside.repeat(DIRECTIONS), torch.ones(1, dtype=torch.bool)])

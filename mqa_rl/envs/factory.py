@@ -11,13 +11,22 @@ from collections.abc import Mapping
 import torch
 from torchrl.envs import TransformedEnv
 
+from mqa_rl import keys
 from mqa_rl.envs.sapien_bin import SapienBinEnv
+from mqa_rl.transforms.base import RewardTerm
+from mqa_rl.transforms.episode_stats import EpisodeStats
 from mqa_rl.transforms.factory import make_reward_transform
 
 
-def make_mqa_env(dataset, reward: Mapping | None = None, counter: torch.Tensor | None = None, **env_kwargs):
-    """``SapienBinEnv(dataset, **env_kwargs)``, wrapped with ``make_reward_transform(reward)`` if given."""
+def make_mqa_env(dataset, reward: Mapping | None = None, counter: torch.Tensor | None = None,
+                 episode_stats: bool = False, **env_kwargs):
+    """``SapienBinEnv(dataset, **env_kwargs)``, wrapped with ``make_reward_transform(reward)`` if given,
+    and with ``EpisodeStats`` over the reward and its terms when ``episode_stats`` (training, evaluation)."""
     env = SapienBinEnv(dataset, **env_kwargs)
     if reward is None:
         return env
-    return TransformedEnv(env, make_reward_transform(reward, push_length=env.push_length, counter=counter))
+    stack = make_reward_transform(reward, push_length=env.push_length, counter=counter)
+    if episode_stats:           # sum the reward terms (not β nor the simple-scene flag) over episodes
+        summed = [t.out_key[1] for t in stack if isinstance(t, RewardTerm) and t.out_key not in (keys.BETA, keys.SIMPLE_SCENE)]
+        stack.append(EpisodeStats(tuple(summed)))
+    return TransformedEnv(env, stack)

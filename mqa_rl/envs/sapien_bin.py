@@ -11,9 +11,12 @@ Task sheet
   tokens [L], and ``info`` measurements (see ``mqa_rl.keys``): object positions, visible area A_s,
   full projected area A_t, overlap χ, target mask, stop flag, executed push.
 * **Action**: ``Categorical(6273)``; see ``mqa_rl.envs.actions`` for the layout (8 directions × 28 ×
-  28 cells, then stop). A push starts at the surface point under the cell centre (from depth),
-  travels a quarter of the image width measured on the bin floor, then the pusher leaves the
-  camera's view and the scene settles (until every body sleeps or moves slower than ``settle_speed``, at most
+  28 cells, then stop). The observation ``action_mask`` marks the pushes that start inside the bin
+  (their surface point inside the inner walls: from the bin and camera geometry and the depth image,
+  see ``actions.push_start_mask``) and stop; masked pushes stay legal to execute, policies simply
+  never need them. A push starts at the surface point under the cell centre (from depth), travels a
+  quarter of the image width measured on the bin floor, then the pusher leaves the camera's view and
+  the scene settles (until every body sleeps or moves slower than ``settle_speed``, at most
   ``settle_steps``).
 * **Episode end**: stop → ``terminated``; ``max_pushes`` pushes → ``truncated``. A ``step`` after that
   raises ``RuntimeError`` until ``reset()`` (TorchRL's rollouts and collectors reset on done).
@@ -138,6 +141,7 @@ class SapienBinEnv(EnvBase):
             rgb=Bounded(0, 255, shape=(3, h, w), dtype=torch.uint8),
             depth=Unbounded(shape=(1, h, w), dtype=f32),
             question=Categorical(len(self.dataset.vocab), shape=(self.question_length,), dtype=i64),
+            action_mask=Binary(n=actions.NUM_ACTIONS, shape=(actions.NUM_ACTIONS,), dtype=torch.bool),
             info=info,
         )
         self.action_spec = Categorical(actions.NUM_ACTIONS, shape=(), dtype=i64)
@@ -303,6 +307,7 @@ class SapienBinEnv(EnvBase):
                 keys.RGB: torch.from_numpy(np.ascontiguousarray(m["rgb"].transpose(2, 0, 1))),
                 keys.DEPTH: torch.from_numpy(m["depth"][None].copy()),
                 keys.QUESTION: self._tokens.clone(),
+                keys.ACTION_MASK: actions.push_start_mask(self.dataset.bin, self.camera, m["depth"]),
                 keys.INFO: info,
             },
             batch_size=[],

@@ -5,6 +5,9 @@ Stateless: at push count k the policy stops with probability 1 / (M + 1 − k), 
 of pushes before stop uniform on {0, …, M} (M = the env's ``max_pushes``); otherwise it pushes at a
 uniformly random cell and direction.
 
+``masked=True`` draws pushes only among those the observation's ``action_mask`` allows (the
+learned policy's action set), a stronger baseline than the paper's.
+
 With ``seed`` the policy draws from its own generator (reproducible in one process); collector
 workers receive copies of it, so leave ``seed=None`` there to draw from each worker's own global
 torch RNG (the workers would otherwise repeat each other's actions).
@@ -24,8 +27,11 @@ class RandomMQAPolicy(TensorDictModuleBase):
     in_keys = [keys.PUSH_COUNT]
     out_keys = [keys.ACTION]
 
-    def __init__(self, max_pushes: int = 10, seed: int | None = None):
+    def __init__(self, max_pushes: int = 10, seed: int | None = None, masked: bool = False):
         super().__init__()
+        self.masked = masked
+        if masked:
+            self.in_keys = [keys.PUSH_COUNT, keys.ACTION_MASK]
         if max_pushes < 1:
             raise ValueError(f"max_pushes must be ≥ 1, got {max_pushes}")
         # a buffer, not a plain int: collectors share policy state with their workers, and a
@@ -51,6 +57,10 @@ class RandomMQAPolicy(TensorDictModuleBase):
         k = tensordict.get(keys.PUSH_COUNT).squeeze(-1)
         p_stop = 1.0 / (self.max_pushes + 1 - k).clamp(min=1).to(torch.float32)
         stop = torch.rand(k.shape, generator=self.generator) < p_stop
-        push = torch.randint(0, actions.NUM_PUSHES, k.shape, generator=self.generator)
+        if self.masked:
+            allowed = tensordict.get(keys.ACTION_MASK)[..., : actions.NUM_PUSHES].reshape(-1, actions.NUM_PUSHES)
+            push = torch.multinomial(allowed.float(), 1, generator=self.generator).reshape(k.shape)
+        else:
+            push = torch.randint(0, actions.NUM_PUSHES, k.shape, generator=self.generator)
         tensordict.set(keys.ACTION, torch.where(stop, torch.full_like(push, actions.STOP), push))
         return tensordict

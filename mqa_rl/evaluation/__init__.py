@@ -1,0 +1,1 @@
+"""Episode metrics of the manipulation policy (greedy vs random on the test split)."""

@@ -1,0 +1,71 @@
+"""What an episode achieved, read from the tensordict of its last step (``data["next"][done]``).
+
+Needs ``EpisodeStats`` in the env (``make_mqa_env(..., episode_stats=True)``). Per episode:
+
+* ``reward`` and ``term/<name>``: sums over the episode
+* ``pushes``: pushes executed; ``stopped``: ended by stop (else by the push limit)
+* ``final_simple``: the last image is a simple scene (every target visible with χ ≤ threshold)
+* ``chi_start`` / ``chi_end``: mean χ of the targets in the first / last image; ``chi_change`` =
+  end − start (negative: targets got uncovered)
+* ``hidden_end``: fraction of the targets fully hidden (χ = 1) in the last image
+
+Target metrics are NaN for episodes whose question has no target in the bin (a COUNTING answer 0);
+``summarise`` ignores NaN.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from tensordict import TensorDictBase
+
+from mqa_rl import keys
+from mqa_rl.transforms.episode_stats import mean_target_chi
+from mqa_rl.transforms.functional import is_simple_scene
+
+FULLY_HIDDEN = 1.0 - 1e-6
+FINAL_KEYS = (keys.TARGET_MASK, keys.OVERLAP, keys.TARGET_CHI_START, keys.EPISODE_REWARD, keys.PUSH_COUNT,
+              keys.IS_STOP, keys.EPISODE_TERMS)
+
+
+def episode_metrics(final: TensorDictBase, simple_threshold: float = 0.2) -> dict[str, torch.Tensor]:
+    """Metrics [E] from the last-step tensordicts [E] of E finished episodes."""
+    tmask = final.get(keys.TARGET_MASK)
+    has_target = tmask.any(-1)
+    nan = torch.full(has_target.shape, math.nan)
+    chi_start = final.get(keys.TARGET_CHI_START).squeeze(-1)
+    chi_end = mean_target_chi(final).squeeze(-1)
+    hidden = ((final.get(keys.OVERLAP) >= FULLY_HIDDEN) & tmask).sum(-1) / tmask.sum(-1).clamp(min=1)
+    out = {
+        "reward": final.get(keys.EPISODE_REWARD).squeeze(-1),
+        "pushes": final.get(keys.PUSH_COUNT).squeeze(-1).to(torch.float32),
+        "stopped": final.get(keys.IS_STOP).squeeze(-1).to(torch.float32),
+        "final_simple": is_simple_scene(final.get(keys.OVERLAP), tmask, simple_threshold).to(torch.float32),
+        "chi_start": torch.where(has_target, chi_start, nan),
+        "chi_end": torch.where(has_target, chi_end, nan),
+        "chi_change": torch.where(has_target, chi_end - chi_start, nan),
+        "hidden_end": torch.where(has_target, hidden.to(torch.float32), nan),
+    }
+    terms = final.get(keys.EPISODE_TERMS, None)
+    if terms is not None:
+        for name in terms.keys():
+            out[f"term/{name}"] = terms.get(name).squeeze(-1)
+    return out
+
+
+def mean_ci95(values: torch.Tensor) -> tuple[float, float, int]:
+    """(mean, half-width of the 95 % interval, n) over the finite values; normal approximation
+    (1.96 · sample std / √n), which suits the ≥ 100 episodes of an evaluation. NaN when n < 2."""
+    v = values[torch.isfinite(values)].to(torch.float64)
+    n = v.numel()
+    if n == 0:
+        return math.nan, math.nan, 0
+    if n == 1:
+        return float(v[0]), math.nan, 1
+    return float(v.mean()), float(1.96 * v.std(unbiased=True) / math.sqrt(n)), n
+
+
+def summarise(metrics: dict[str, torch.Tensor]) -> dict[str, float]:
+    """Means of every metric (NaN-aware), for the logs."""
+    return {k: mean_ci95(v)[0] for k, v in metrics.items()}

@@ -1,0 +1,31 @@
+"""Run whole episodes of a policy on an env with ``EpisodeStats`` and collect their metrics."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import torch
+from tensordict import TensorDictBase
+from torchrl.envs.utils import ExplorationType, set_exploration_type
+
+from mqa_rl.evaluation.episode_metrics import FINAL_KEYS, episode_metrics
+
+
+def run_episodes(env, policy, episodes: int, *, max_pushes: int, simple_threshold: float = 0.2,
+                 on_episode: Callable[[int, TensorDictBase], None] | None = None) -> dict[str, torch.Tensor]:
+    """``episodes`` rollouts (each to its end) under the policy's deterministic mode; metrics [episodes].
+
+    ``on_episode(i, rollout)`` sees each rollout (e.g. to write a video). Seed the env beforehand for
+    the same questions every time.
+    """
+    finals = []
+    with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
+        for i in range(episodes):
+            rollout = env.rollout(max_pushes + 1, policy, break_when_any_done=True)
+            if not bool(rollout["next", "done"][-1].item()):
+                raise RuntimeError(f"episode {i} did not end within {max_pushes + 1} steps: is the env's "
+                                   f"max_pushes larger than {max_pushes}?")
+            finals.append(rollout["next"][-1].select(*FINAL_KEYS, strict=False))
+            if on_episode is not None:
+                on_episode(i, rollout)
+    return episode_metrics(torch.stack(finals), simple_threshold)

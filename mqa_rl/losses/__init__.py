@@ -1,0 +1,1 @@
+"""DQN loss and prioritized replay for the push Q-network."""

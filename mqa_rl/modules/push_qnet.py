@@ -1,0 +1,159 @@
+"""PushQNet: the paper's manipulation Q-network (Sec. IV-B, Fig. 3), one Q value per action.
+
+    rgb   → trunk → 28×28×C ┐
+    depth → trunk → 28×28×C ┴ concat → 1×1 convs → 28×28×32 ┐
+    question → embedding → 2-layer LSTM → linear → 32, tiled ┴ concat 28×28×64 → head → 28×28×9
+
+The head's channels 0…7 are the pushes in direction d (``mqa_rl.envs.actions``), channel 8 is a
+stop map whose spatial mean is Q(stop). The output is flat ``[*B, 6273]`` in the env's layout
+``a = d·784 + row·28 + col`` (6272 = stop): channel d, grid row and column of the map are the
+direction, image row and column of the push.
+
+Alignment: a stride-8 conv trunk's output cell (r, c) is centred on input pixel (8r, 8c), half a
+cell up-left of the cell centre where the env starts the push. The input is shifted by half a cell
+(``_align``) so that feature cell (r, c) is centred on grid cell (r, c) (a test checks this with
+input gradients).
+
+Depth enters as height above the bin floor, ``(camera_distance − depth) / depth_scale`` (metres /
+0.1 m by default; 0 on the floor, ~1.4 for a 50-object pile), so it does not depend on the
+camera height. The ResNet trunks get it as 3 identical channels (as the authors did) and rgb with
+the ImageNet mean/std, to suit pretrained weights.
+
+Options beyond the paper (``paper`` profile: all off): ``head_context`` 3×3 convs (at the width of
+the first head layer, after a 1×1 reduction) before the final 1×1 layers (a push acts 7 cells away;
+1×1 heads only see their own cell), ``coords`` two channels of grid coordinates (where the walls
+are), ``light_downsample`` (the light trunk on a 2×2-averaged image).
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from mqa_rl.envs import actions
+from mqa_rl.modules.trunks import make_trunk
+
+IMAGENET_MEAN = (0.485, 0.456, 0.406)
+IMAGENET_STD = (0.229, 0.224, 0.225)
+
+
+def _conv_stack(channels: list[int], kernel: int = 1, last_relu: bool = True) -> nn.Sequential:
+    layers: list[nn.Module] = []
+    for i, (cin, cout) in enumerate(zip(channels[:-1], channels[1:])):
+        layers.append(nn.Conv2d(cin, cout, kernel, padding=kernel // 2))
+        if last_relu or i < len(channels) - 2:
+            layers.append(nn.ReLU(inplace=True))
+    return nn.Sequential(*layers)
+
+
+class QuestionEncoder(nn.Module):
+    """Tokens [B, L] (0 = padding) → [B, out]: embedding, LSTM, last non-padding state, linear."""
+
+    def __init__(self, vocab_size: int, embed: int = 64, hidden: int = 64, layers: int = 2, out: int = 32):
+        super().__init__()
+        self.embedding = nn.Embedding(vocab_size, embed, padding_idx=0)
+        self.lstm = nn.LSTM(embed, hidden, num_layers=layers, batch_first=True)
+        self.proj = nn.Linear(hidden, out)
+
+    def forward(self, tokens: torch.Tensor) -> torch.Tensor:
+        states, _ = self.lstm(self.embedding(tokens))
+        last = (tokens != 0).sum(-1).clamp(min=1) - 1
+        return self.proj(states[torch.arange(tokens.shape[0], device=tokens.device), last])
+
+
+class PushQNet(nn.Module):
+    """(rgb uint8 [*B,3,H,W], depth [*B,1,H,W] metres, question int64 [*B,L]) → Q [*B, 6273]."""
+
+    def __init__(
+        self,
+        vocab_size: int,
+        *,
+        camera_distance: float,
+        trunk: str = "light",
+        weights: str | None = None,
+        light_channels=(16, 32, 64, 64),
+        light_downsample: int = 1,
+        fuse_channels=(512, 128, 32),
+        question_dim: int = 32,
+        head_channels=(32, 16),
+        head_context: int = 0,
+        coords: bool = False,
+        depth_scale: float = 0.1,
+        freeze_trunk: bool = False,
+    ):
+        super().__init__()
+        self.trunk_name = trunk
+        self.imagenet_input = trunk != "light"
+        self.depth_channels = 3 if self.imagenet_input else 1    # the ResNets see depth as 3 copies
+        self.rgb_trunk = make_trunk(trunk, weights, light_channels, light_downsample)
+        self.depth_trunk = make_trunk(trunk, weights, light_channels, light_downsample, in_channels=self.depth_channels)
+        if freeze_trunk:
+            for p in (*self.rgb_trunk.parameters(), *self.depth_trunk.parameters()):
+                p.requires_grad_(False)
+        self.camera_distance = float(camera_distance)
+        self.depth_scale = float(depth_scale)
+        feat = self.rgb_trunk.out_channels + self.depth_trunk.out_channels
+        self.fuse = _conv_stack([feat, *fuse_channels])
+        self.question = QuestionEncoder(vocab_size, out=question_dim)
+        self.coords = coords
+        state = fuse_channels[-1] + question_dim + (2 if coords else 0)
+        if head_context:      # 1×1 down to head_channels[0], then 3×3 convs at that width
+            width = head_channels[0]
+            context = [nn.Conv2d(state, width, 1), nn.ReLU(inplace=True)]
+            for _ in range(head_context):
+                context += [nn.Conv2d(width, width, 3, padding=1), nn.ReLU(inplace=True)]
+            self.head = nn.Sequential(*context, _conv_stack([*head_channels, actions.DIRECTIONS + 1], last_relu=False))
+        else:                 # the paper: 1×1 convs only
+            self.head = nn.Sequential(_conv_stack([state, *head_channels, actions.DIRECTIONS + 1], last_relu=False))
+        self.register_buffer("rgb_mean", torch.tensor(IMAGENET_MEAN).view(1, 3, 1, 1) if self.imagenet_input
+                             else torch.full((1, 3, 1, 1), 0.5))
+        self.register_buffer("rgb_std", torch.tensor(IMAGENET_STD).view(1, 3, 1, 1) if self.imagenet_input
+                             else torch.full((1, 3, 1, 1), 0.25))
+
+    # ------------------------------------------------------------------------------------ inputs
+    def normalise(self, rgb: torch.Tensor, depth: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """uint8 rgb → standardised float; depth (m, any float dtype) → height above floor / depth_scale."""
+        x = (rgb.to(torch.float32) / 255.0 - self.rgb_mean) / self.rgb_std
+        d = depth.to(torch.float32)
+        h = torch.where(d > 0, (self.camera_distance - d) / self.depth_scale, torch.zeros_like(d))
+        return x, h.expand(-1, self.depth_channels, -1, -1)
+
+    def _align(self, x: torch.Tensor) -> torch.Tensor:
+        """Shift the image up-left so that feature cell (r, c) centres on grid cell (r, c).
+
+        A stride-8 trunk centres output r on input pixel 8r + offset; the cell centre is pixel
+        8r + 3.5 (pixel-index coordinates): shift by round(3.5 − offset) (0.5 px off at worst)."""
+        cell = x.shape[-1] / actions.GRID
+        shift = int(round(cell / 2 - 0.5 - self.rgb_trunk.centre_offset))
+        if shift <= 0:
+            return x
+        return F.pad(x[..., shift:, shift:], (0, shift, 0, shift), mode="replicate")
+
+    def _grid(self, feat: torch.Tensor) -> torch.Tensor:
+        if feat.shape[-2:] != (actions.GRID, actions.GRID):
+            feat = F.adaptive_avg_pool2d(feat, actions.GRID)
+        return feat
+
+    # ------------------------------------------------------------------------------------ forward
+    def q_map(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor) -> torch.Tensor:
+        """[B, 9, 28, 28]: 8 push direction maps and the stop map (batch dims flattened)."""
+        x, h = self.normalise(rgb, depth)
+        fr = self._grid(self.rgb_trunk(self._align(x)))
+        fd = self._grid(self.depth_trunk(self._align(h)))
+        visual = self.fuse(torch.cat([fr, fd], 1))
+        q = self.question(question)[:, :, None, None].expand(-1, -1, actions.GRID, actions.GRID)
+        parts = [visual, q]
+        if self.coords:
+            lin = torch.linspace(-1, 1, actions.GRID, device=visual.device)
+            yy, xx = torch.meshgrid(lin, lin, indexing="ij")
+            parts.append(torch.stack([xx, yy]).expand(visual.shape[0], -1, -1, -1))
+        return self.head(torch.cat(parts, 1))
+
+    def forward(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor) -> torch.Tensor:
+        batch = rgb.shape[:-3]
+        maps = self.q_map(rgb.reshape(-1, *rgb.shape[-3:]), depth.reshape(-1, *depth.shape[-3:]),
+                          question.reshape(-1, question.shape[-1]))
+        push = maps[:, : actions.DIRECTIONS].flatten(1)          # d·784 + row·28 + col
+        stop = maps[:, actions.DIRECTIONS].mean((-2, -1)).unsqueeze(-1)
+        return torch.cat([push, stop], -1).reshape(*batch, actions.NUM_ACTIONS)

@@ -1,0 +1,1 @@
+"""State of a DQN training run that survives a kill: the checkpoint."""

@@ -1,0 +1,116 @@
+"""``TrainingCheckpoint``: everything a DQN run needs to continue after SIGKILL, saved atomically.
+
+Components (``torchrl.checkpoint.Checkpoint``, one directory each, written to a hidden stage and
+renamed into place; ``CheckpointRotation`` keeps the newest ``keep_last``): the Q-network, the loss
+module (online and target parameters), the optimiser, the replay buffer (storage, priorities,
+writer cursor), the ε-greedy module (its ε), the run counters (``state``: frames, updates,
+episodes, next evaluation / checkpoint frame, target-updater counter, β step counter) and the
+global RNG state (python, numpy, torch), and last the SHA-256 of every file of the others
+(``IntegrityAdapter``), checked before anything is restored: a truncated or altered file is refused
+instead of being loaded as garbage (a truncated memmap would otherwise read as zeros).
+
+The run is saved between a finished update phase and the next collection, so a resumed run restarts
+collection from the saved frame count: no frame is lost or collected twice (the episodes in flight at
+the kill are restarted from a reset). A checkpoint that cannot be read raises ``CheckpointCorrupt``
+with its path and what to do.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import torch
+from torchrl.checkpoint import Checkpoint, CheckpointAdapter, CheckpointError, CheckpointRotation, GlobalRNGState
+
+INTEGRITY = "zz_integrity"        # sorts last: saved after every other component of the checkpoint
+
+
+class CheckpointCorrupt(RuntimeError):
+    """A checkpoint exists but cannot be restored (truncated, edited, or from another config)."""
+
+
+def _digests(components_dir: Path, skip: Path) -> dict[str, str]:
+    out = {}
+    for f in sorted(components_dir.rglob("*")):
+        if f.is_file() and skip not in f.parents:
+            h = hashlib.sha256()
+            with f.open("rb") as fh:
+                for block in iter(lambda: fh.read(1 << 22), b""):
+                    h.update(block)
+            out[f.relative_to(components_dir).as_posix()] = h.hexdigest()
+    return out
+
+
+class IntegrityAdapter(CheckpointAdapter):
+    """Writes the SHA-256 of the files of the components saved before it (they sort first)."""
+
+    adapter_id = "mqa_rl.sha256"
+    format_version = 1
+
+    def save(self, component, path: Path, *, args, kwargs):
+        path.mkdir(parents=True, exist_ok=True)
+        (path / "sha256.json").write_text(json.dumps(_digests(path.parent, path), indent=0))
+
+    def load(self, component, path: Path, *, map_location, tensor_load_kwargs, args, kwargs):
+        return None                       # verified before loading (TrainingCheckpoint.verify)
+
+    @staticmethod
+    def verify(checkpoint_dir: Path) -> None:
+        """Raise ``ValueError`` naming the files that are missing or differ from their digests."""
+        found = list((checkpoint_dir / "components").glob(f"*{INTEGRITY}/sha256.json"))
+        if not found:
+            raise ValueError("no integrity record (sha256.json): not a complete mqa_rl training checkpoint")
+        expected = json.loads(found[0].read_text())
+        actual = _digests(checkpoint_dir / "components", found[0].parent)
+        bad = sorted(k for k in expected if actual.get(k) != expected[k]) + sorted(set(actual) - set(expected))
+        if bad:
+            raise ValueError(f"{len(bad)} file(s) missing or changed since saved, e.g. {bad[:3]}")
+
+
+class TrainingCheckpoint:
+    def __init__(self, directory: str | Path, *, actor, loss, optimizer, replay_buffer, egreedy, target_updater,
+                 beta_counter: torch.Tensor, state: dict, keep_last: int = 2):
+        self.directory = Path(directory)
+        self.rotation = CheckpointRotation(self.directory, keep_last=keep_last)
+        self.state = state
+        self.target_updater = target_updater
+        self.beta_counter = beta_counter
+        self.checkpoint = Checkpoint(policy=actor, loss=loss, optimizer=optimizer, replay_buffer=replay_buffer,
+                                     exploration=egreedy, trainer_state=state, rng=GlobalRNGState())
+        self.checkpoint.register(INTEGRITY, {}, adapter=IntegrityAdapter())
+        self.replay_buffer = replay_buffer
+
+    def save(self) -> Path:
+        """Write a checkpoint at the current frame count (atomically); returns its path."""
+        self.state["target_updater_counter"] = int(getattr(self.target_updater, "counter", 0))
+        self.state["beta_steps"] = int(self.beta_counter)
+        return self.rotation.save(self.checkpoint, step=int(self.state["frames"]))
+
+    def latest(self) -> Path | None:
+        return self.rotation.latest() if self.directory.exists() else None
+
+    def load(self, path: str | Path | None = None) -> Path:
+        """Restore every component from ``path`` (default: the newest checkpoint) in place, into a
+        fresh run (nothing sampled from the replay yet)."""
+        path = Path(path) if path is not None else self.latest()
+        if path is None:
+            raise FileNotFoundError(f"no checkpoint in {self.directory}")
+        if len(self.replay_buffer):
+            raise RuntimeError("load a checkpoint into a fresh run only (this replay buffer already holds data)")
+        hint = (f"delete {path} to resume from an older checkpoint in {self.directory}, "
+                f"or start afresh with resume=false (or another out_dir)")
+        try:
+            IntegrityAdapter.verify(path)
+            self.checkpoint.load(path, strict="error")
+        except (CheckpointError, OSError, ValueError, KeyError, RuntimeError, EOFError) as error:
+            raise CheckpointCorrupt(f"checkpoint {path} cannot be restored ({type(error).__name__}: "
+                                    f"{str(error)[:500]}); {hint}") from error
+        missing = {"frames", "updates"} - set(self.state)
+        if missing:
+            raise CheckpointCorrupt(f"checkpoint {path} lacks the run counters {sorted(missing)}; {hint}")
+        if hasattr(self.target_updater, "counter"):
+            self.target_updater.counter = int(self.state.get("target_updater_counter", 0))
+        self.beta_counter.fill_(int(self.state.get("beta_steps", 0)))
+        return path

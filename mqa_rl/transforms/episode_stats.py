@@ -1,0 +1,55 @@
+"""Running episode statistics as observations, so that a collector's batch tells at every episode
+end what the episode earned: reward and reward-term sums, and the targets' mean overlap χ at reset.
+
+Put it after the reward stack. Sums run from the reset; the values at a step with ``done`` describe
+the finished episode (``mqa_rl.evaluation.episode_metrics`` turns them into metrics).
+"""
+
+from __future__ import annotations
+
+import torch
+from tensordict import TensorDictBase
+from torchrl.data import Composite, Unbounded
+from torchrl.envs import Transform
+
+from mqa_rl import keys
+
+
+def mean_target_chi(td: TensorDictBase) -> torch.Tensor:
+    """Mean χ of the question's targets, [..., 1]; 0 where there is no target."""
+    t = td.get(keys.TARGET_MASK).to(torch.float32)
+    chi = td.get(keys.OVERLAP)
+    return ((chi * t).sum(-1) / t.sum(-1).clamp(min=1)).unsqueeze(-1)
+
+
+class EpisodeStats(Transform):
+    def __init__(self, terms: tuple[str, ...] = ()):
+        self.terms = tuple(terms)
+        self._term_keys = [(keys.REWARD_TERMS, t) for t in self.terms]
+        out = [keys.EPISODE_REWARD, keys.TARGET_CHI_START, *((*keys.EPISODE_TERMS, t) for t in self.terms)]
+        super().__init__(in_keys=[keys.REWARD, *self._term_keys], out_keys=out)
+
+    def _zeros(self, td: TensorDictBase) -> torch.Tensor:
+        return torch.zeros(*td.batch_size, 1, device=td.device)
+
+    def _reset(self, tensordict, tensordict_reset):
+        tensordict_reset.set(keys.EPISODE_REWARD, self._zeros(tensordict_reset))
+        for t in self.terms:
+            tensordict_reset.set((*keys.EPISODE_TERMS, t), self._zeros(tensordict_reset))
+        tensordict_reset.set(keys.TARGET_CHI_START, mean_target_chi(tensordict_reset))
+        return tensordict_reset
+
+    def _step(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> TensorDictBase:
+        next_tensordict.set(keys.EPISODE_REWARD, tensordict.get(keys.EPISODE_REWARD) + next_tensordict.get(keys.REWARD))
+        for t, key in zip(self.terms, self._term_keys):
+            total = (*keys.EPISODE_TERMS, t)
+            next_tensordict.set(total, tensordict.get(total) + next_tensordict.get(key))
+        next_tensordict.set(keys.TARGET_CHI_START, tensordict.get(keys.TARGET_CHI_START))
+        return next_tensordict
+
+    def transform_observation_spec(self, spec: Composite) -> Composite:
+        scalar = Unbounded(shape=(*spec.shape, 1), dtype=torch.float32, device=spec.device)
+        terms = Composite({t: scalar.clone() for t in self.terms}, shape=spec.shape, device=spec.device)
+        spec[keys.EPISODE] = Composite(reward=scalar.clone(), terms=terms, target_chi_start=scalar.clone(),
+                                       shape=spec.shape, device=spec.device)
+        return spec

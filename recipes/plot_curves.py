@@ -1,0 +1,86 @@
+"""The paper's Fig. 7 from train_dqn.py logs: reward per episode in training and testing, one panel
+per run (variant), saved as PNG.
+
+    python recipes/plot_curves.py outputs/train_dqn/global/<t> outputs/train_dqn/local/<t> \
+        outputs/train_dqn/global_local/<t> --out fig7.png
+
+Training reward: the mean over the episodes that ended in each logged batch (``train/reward``),
+smoothed with a moving average over ``--window`` points; testing: the greedy evaluations
+(``eval/reward``). The x axis is collected frames (env steps).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+
+def read_scalar(run: Path, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """(steps, values) of one logged scalar, e.g. ``train/reward``; empty arrays if never logged."""
+    path = run / "csv" / "scalars" / f"{name}.csv"
+    if not path.exists():
+        return np.zeros(0), np.zeros(0)
+    rows = np.loadtxt(path, delimiter=",", ndmin=2)
+    return rows[:, 0], rows[:, 1]
+
+
+def smooth(values: np.ndarray, window: int) -> np.ndarray:
+    if window <= 1 or len(values) < window:
+        return values
+    kernel = np.ones(window) / window
+    return np.convolve(np.pad(values, (window - 1, 0), mode="edge"), kernel, mode="valid")
+
+
+def label(run: Path) -> str:
+    cfg = run / "config.yaml"
+    if cfg.exists():
+        from omegaconf import OmegaConf
+
+        c = OmegaConf.load(cfg)
+        return f"DQN ({c.reward.name}, {c.model.trunk})"
+    return run.name
+
+
+def plot(runs: list[Path], out: Path, window: int = 10) -> Path:
+    fig, axes = plt.subplots(1, len(runs), figsize=(5 * len(runs), 3.6), squeeze=False)
+    for ax, run in zip(axes[0], runs):
+        steps, reward = read_scalar(run, "train/reward")
+        if len(steps) == 0:
+            raise FileNotFoundError(f"{run} has no csv/scalars/train/reward.csv: is it a train_dqn.py output folder?")
+        ax.plot(steps, reward, color="tab:blue", alpha=0.25, lw=0.8)
+        ax.plot(steps, smooth(reward, window), color="tab:blue", label="training")
+        es, ev = read_scalar(run, "eval/reward")
+        if len(es):
+            ax.plot(es, ev, "o-", color="tab:orange", label="testing (greedy)")
+        ax.set_title(label(run))
+        ax.set_xlabel("env steps")
+        ax.set_ylabel("reward per episode")
+        ax.grid(alpha=0.3)
+        ax.legend()
+    fig.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(f".{out.stem}.tmp{os.getpid()}{out.suffix}")
+    fig.savefig(tmp, dpi=120)
+    plt.close(fig)
+    os.replace(tmp, out)
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("runs", nargs="+", type=Path, help="train_dqn.py output folders, one panel each")
+    ap.add_argument("--out", type=Path, default=Path("fig7_rewards.png"))
+    ap.add_argument("--window", type=int, default=10, help="moving-average window of the training curve")
+    args = ap.parse_args()
+    print(plot(args.runs, args.out, args.window))
+
+
+if __name__ == "__main__":
+    main()

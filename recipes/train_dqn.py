@@ -1,0 +1,248 @@
+"""Train the push Q-network with DQN (double DQN, prioritized replay) on SapienBinEnv.
+
+    python recipes/train_dqn.py reward=global         # DQN(R_g)
+    python recipes/train_dqn.py reward=local          # DQN(R_l)
+    python recipes/train_dqn.py reward=global_local   # DQN(R_g+R_l)
+    python recipes/train_dqn.py profile=paper         # the paper's network and settings (ResNet-101, replay 4000)
+    python recipes/train_dqn.py out_dir=runs/x resume=true   # continue a killed run from its last checkpoint
+
+Config groups (recipes/conf/): reward, trunk, collector, buffer, optim, loss, logger, checkpoint, eval,
+profile. The loop follows TorchRL's sota DQN recipe: collect → extend replay → update → log →
+sync weights; greedy evaluation on the test split and checkpoints every so many frames.
+"""
+
+from __future__ import annotations
+
+import os
+
+# Idle OpenMP threads sleep instead of spinning: with the env (and other people's jobs) on the same
+# 2 cores, spinning torch threads made updates 7-40x slower (measured); set before torch loads.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+import copy  # noqa: E402
+import random  # noqa: E402
+import shutil  # noqa: E402
+import signal  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import hydra
+import numpy as np
+import torch
+from omegaconf import DictConfig, OmegaConf
+from tqdm import tqdm
+
+from mqa_rl import keys
+from mqa_rl.collectors.factory import make_collector, running
+from mqa_rl.envs.factory import make_mqa_env
+from mqa_rl.envs.qmap_overlay import qmap_episode_frames, qmap_image
+from mqa_rl.envs.video import write_video
+from mqa_rl.evaluation.episode_metrics import episode_metrics, summarise
+from mqa_rl.evaluation.rollouts import run_episodes
+from mqa_rl.losses.dqn import make_dqn_loss
+from mqa_rl.losses.replay import annealed_is_beta, compact_transitions, make_replay_buffer
+from mqa_rl.modules.push_policy import make_explorer, make_push_qnet, make_q_actor
+from mqa_rl.training.checkpoint import TrainingCheckpoint
+from mqa_rl.training.run_logger import RunLogger, trim_scalars
+
+
+def _sigterm_to_exit(signum, frame):          # so that `running()` shuts the workers down on `kill`
+    raise SystemExit(f"terminated by signal {signum}")
+
+
+def check_config(cfg: DictConfig) -> None:
+    """Errors that would otherwise surface minutes later, each saying what to change."""
+    col, buf, loss = cfg.collector, cfg.buffer, cfg.loss
+    if col.total_frames <= 0 or col.total_frames % col.frames_per_batch:
+        raise ValueError(f"collector.total_frames={col.total_frames} must be a positive multiple of "
+                         f"collector.frames_per_batch={col.frames_per_batch}")
+    if loss.updates_per_batch < 0:
+        raise ValueError(f"loss.updates_per_batch={loss.updates_per_batch} must be ≥ 0")
+    if buf.size < buf.batch_size:
+        raise ValueError(f"buffer.size={buf.size} must be ≥ buffer.batch_size={buf.batch_size}")
+    if not 0.0 <= col.eps_end <= col.eps_init <= 1.0:
+        raise ValueError(f"need 0 ≤ collector.eps_end ({col.eps_end}) ≤ collector.eps_init ({col.eps_init}) ≤ 1")
+    if cfg.eval.interval_frames <= 0 or cfg.checkpoint.interval_frames <= 0:
+        raise ValueError("eval.interval_frames and checkpoint.interval_frames must be positive")
+    if not Path(cfg.dataset).exists():
+        raise FileNotFoundError(f"dataset {cfg.dataset} does not exist: make it with recipes/make_dataset.py "
+                                f"or point dataset=... at one")
+
+
+def learner_device(name: str) -> torch.device:
+    """The learner's device (``device=cpu|cuda|cuda:1``); the envs and acting stay on the CPU."""
+    device = torch.device(name)
+    if device.type == "cuda" and not torch.cuda.is_available():
+        raise ValueError(f"device={name} but torch sees no CUDA device (torch {torch.__version__}); use device=cpu")
+    return device
+
+
+def evaluate(env, actor, cfg: DictConfig, logger: RunLogger, step: int) -> dict[str, float]:
+    """Greedy episodes on the eval split (same questions every time); Q-map image and videos."""
+    base = env.base_env
+    base.set_seed(cfg.seed + 10_000)
+
+    def media(i, rollout):
+        if i == 0:
+            rgb = rollout[keys.RGB][0].numpy().transpose(1, 2, 0)
+            logger.log_image("eval/qmap", qmap_image(rgb, rollout[keys.ACTION_VALUE][0], rollout[keys.ACTION_MASK][0]), step)
+        if i < cfg.eval.video_episodes:
+            frames = qmap_episode_frames(rollout, base.camera, base.question.text)
+            path = write_video(frames, logger.media / f"eval_{step:07d}_{i}.{cfg.eval.video_format}")
+            logger.log_video_file(f"eval/video_{i}", path, step)
+
+    metrics = run_episodes(env, actor, cfg.eval.episodes, max_pushes=cfg.env.max_pushes,
+                           simple_threshold=cfg.reward.simple_threshold, on_episode=media)
+    means = summarise(metrics)
+    means["stop_rate"] = means.pop("stopped")
+    return {f"eval/{k}": v for k, v in means.items()}
+
+
+def train(cfg: DictConfig) -> dict:
+    check_config(cfg)
+    out = Path(cfg.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    torch.manual_seed(cfg.seed)
+    np.random.seed(cfg.seed)
+    random.seed(cfg.seed)
+    if cfg.threads:
+        torch.set_num_threads(cfg.threads)
+    col, buf = cfg.collector, cfg.buffer
+
+    # ---- env (the eval env doubles as the proof env that sizes the network)
+    counter = torch.zeros((), dtype=torch.int64).share_memory_()       # β step counter, shared with workers
+    env_cfg = OmegaConf.to_container(cfg.env)
+    env_kwargs = dict(dataset=str(cfg.dataset), reward=OmegaConf.to_container(cfg.reward), episode_stats=True, **env_cfg)
+    eval_env = make_mqa_env(**{**env_kwargs, "split": cfg.eval.split, "difficulties": cfg.eval.difficulties},
+                            seed=cfg.seed + 10_000)
+    vocab = eval_env.observation_spec[keys.QUESTION].space.n
+    device = learner_device(cfg.device)
+    net = make_push_qnet(cfg.model, vocab_size=vocab, camera_distance=eval_env.base_env.camera.distance).to(device)
+    actor = make_q_actor(net, eval_env.action_spec, masked=cfg.action_mask)
+    explore = make_explorer(actor, eval_env.action_spec, eps_init=col.eps_init, eps_end=col.eps_end,
+                            annealing_frames=col.annealing_frames, masked=cfg.action_mask).to(device)
+    egreedy = explore[-1]
+    # the envs act on the CPU: a learner on a GPU hands a CPU copy of the policy to the collector
+    acting = explore if device.type == "cpu" else copy.deepcopy(explore).to("cpu")
+
+    # ---- loss, optimiser, replay
+    loss, target_updater = make_dqn_loss(actor, cfg.loss)
+    params = [p for p in loss.parameters() if p.requires_grad]
+    optim = torch.optim.Adam(params, lr=cfg.optim.lr, weight_decay=cfg.optim.weight_decay)
+    scratch = Path(buf.scratch_dir) if buf.scratch_dir else out / "replay_scratch"
+    if scratch.exists():                     # a previous (killed) process's memmap files: not a checkpoint
+        shutil.rmtree(scratch)
+    rb = make_replay_buffer(buf, scratch)
+
+    # ---- state and checkpoint
+    state = {"frames": 0, "updates": 0, "episodes": 0, "next_eval": int(cfg.eval.interval_frames),
+             "next_checkpoint": int(cfg.checkpoint.interval_frames), "train_seconds": 0.0}
+    ckpt = TrainingCheckpoint(out / "checkpoints", actor=actor, loss=loss, optimizer=optim, replay_buffer=rb,
+                              egreedy=egreedy, target_updater=target_updater, beta_counter=counter, state=state,
+                              keep_last=cfg.checkpoint.keep_last)
+    if ckpt.latest() is not None:
+        if not cfg.resume:
+            raise FileExistsError(f"{out} already holds checkpoints ({ckpt.latest().name}): pass resume=true to "
+                                  f"continue that run, or choose another out_dir")
+        path = ckpt.load()
+        dropped = trim_scalars(out / "csv", state["frames"])
+        print(f"resumed from {path} at {state['frames']} frames, {state['updates']} updates "
+              f"({dropped} log rows after it dropped)")
+    elif cfg.resume:
+        print(f"resume=true but no checkpoint in {ckpt.directory}: starting a new run")
+    config = OmegaConf.to_container(cfg, resolve=True)
+    if not (out / "config.yaml").exists():  # what recipes/evaluate_policy.py rebuilds the network from
+        tmp = out / f".config.yaml.tmp{os.getpid()}"
+        OmegaConf.save(OmegaConf.create(config), tmp)
+        os.replace(tmp, out / "config.yaml")
+    logger = RunLogger(out, wandb=cfg.logger.wandb, project=cfg.logger.project,
+                       exp_name=f"dqn_{cfg.reward.name}_{cfg.model.trunk}", config=config)
+
+    total = int(col.total_frames)
+    remaining = total - state["frames"]
+    if remaining > 0:
+        collector = make_collector(col, acting, {**env_kwargs, "counter": counter}, total_frames=remaining,
+                                   seed=cfg.seed + state["frames"])
+        if cfg.threads:
+            torch.set_num_threads(cfg.threads)
+        bar = tqdm(total=total, initial=state["frames"], unit="frame", dynamic_ncols=True, disable=not cfg.logger.progress)
+        start, t_wait = time.perf_counter(), time.perf_counter()
+        frames_at_start = state["frames"]
+        with running(collector):
+            for data in collector:
+                t_collect = time.perf_counter() - t_wait
+                data = data.reshape(-1)
+                n = data.numel()
+                rb.extend(compact_transitions(data))
+                state["frames"] += n
+                counter.fill_(state["frames"])
+                egreedy.step(n)
+                metrics = {"train/epsilon": float(egreedy.eps), "train/beta": float(data["next", *keys.BETA].mean()),
+                           "time/env_steps_per_s": n / max(t_collect, 1e-9)}
+                done = data["next", "done"].squeeze(-1)
+                if done.any():
+                    ep = episode_metrics(data["next"][done], cfg.reward.simple_threshold)
+                    state["episodes"] += int(done.sum())
+                    metrics.update({f"train/{k}": v for k, v in summarise(ep).items()})
+                    metrics["train/stop_rate"] = metrics.pop("train/stopped")
+
+                # ---- updates
+                t0 = time.perf_counter()
+                if state["frames"] >= col.learning_starts and len(rb) >= buf.batch_size:
+                    losses, qs = [], []
+                    for _ in range(cfg.loss.updates_per_batch):
+                        sample = rb.sample().to(device)
+                        out_td = loss(sample)
+                        optim.zero_grad()
+                        out_td["loss"].backward()
+                        torch.nn.utils.clip_grad_norm_(params, cfg.optim.max_grad_norm)
+                        optim.step()
+                        target_updater.step()
+                        rb.update_tensordict_priority(sample.to("cpu"))
+                        state["updates"] += 1
+                        losses.append(out_td["loss"].item())
+                        qs.append(sample[keys.TD_ERROR].mean().item())
+                    rb.sampler.beta = annealed_is_beta(buf.beta_init, state["frames"] / total)
+                    if losses:
+                        metrics.update({"train/loss": float(np.mean(losses)), "train/td_error": float(np.mean(qs)),
+                                        "train/mean_q": float(data[keys.CHOSEN_ACTION_VALUE].mean()),
+                                        "train/is_beta": rb.sampler.beta,
+                                        "time/updates_per_s": len(losses) / max(time.perf_counter() - t0, 1e-9)})
+                if acting is not explore:
+                    acting.load_state_dict(explore.state_dict())
+                collector.update_policy_weights_()
+                state["train_seconds"] += time.perf_counter() - t_wait
+                metrics["time/loop_env_steps_per_s"] = (state["frames"] - frames_at_start) / (time.perf_counter() - start)
+                metrics["train/updates"] = state["updates"]
+                metrics["train/episodes"] = state["episodes"]
+
+                if state["frames"] >= state["next_eval"] or state["frames"] >= total:
+                    metrics.update(evaluate(eval_env, acting[0], cfg, logger, state["frames"]))
+                    while state["next_eval"] <= state["frames"]:
+                        state["next_eval"] += int(cfg.eval.interval_frames)
+                logger.log_metrics(metrics, step=state["frames"])
+                if state["frames"] >= state["next_checkpoint"] or state["frames"] >= total:
+                    while state["next_checkpoint"] <= state["frames"]:
+                        state["next_checkpoint"] += int(cfg.checkpoint.interval_frames)
+                    ckpt.save()
+                bar.update(n)
+                bar.set_postfix(eps=f"{egreedy.eps.item():.2f}", upd=state["updates"],
+                                R=f"{metrics.get('train/reward', float('nan')):+.2f}")
+                t_wait = time.perf_counter()
+        bar.close()
+    logger.close()
+    eval_env.close()
+    summary = {"frames": state["frames"], "updates": state["updates"], "episodes": state["episodes"],
+               "train_seconds": round(state["train_seconds"], 1), "checkpoint": str(ckpt.latest())}
+    print("done:", summary)
+    return summary
+
+
+@hydra.main(config_path="conf", config_name="train_dqn", version_base="1.3")
+def main(cfg: DictConfig) -> None:
+    signal.signal(signal.SIGTERM, _sigterm_to_exit)
+    train(cfg)
+
+
+if __name__ == "__main__":
+    main()

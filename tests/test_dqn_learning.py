@@ -1,0 +1,112 @@
+"""DQN loss and prioritized replay on push-Q-network batches: learning moves the TD error, updates
+move the priorities, the replay stores compact transitions."""
+
+import numpy as np
+import pytest
+import torch
+from tensordict import TensorDict
+from torchrl.data import Categorical
+
+from mqa_rl import keys
+from mqa_rl.envs import actions
+from mqa_rl.losses.dqn import make_dqn_loss
+from mqa_rl.losses.replay import (REPLAY_KEYS, annealed_is_beta, compact_transitions, make_replay_buffer,
+                                  transition_bytes)
+from mqa_rl.modules.push_policy import make_push_qnet, make_q_actor
+from mqa_rl.sim.geometry import BinSpec, CameraSpec
+from torch_threads import one_torch_thread  # noqa: F401  (autouse)
+
+VOCAB, L, S = 30, 8, 224
+SMALL_NET = {"trunk": "light", "light_channels": [8, 8, 16, 16], "fuse_channels": [16, 8], "head_channels": [8],
+             "question_dim": 8, "head_context": 1, "coords": True}
+
+
+def transitions(n: int, seed: int = 0) -> TensorDict:
+    """Collected-like transitions (with info, which the replay drops)."""
+    g = torch.Generator().manual_seed(seed)
+    mask = actions.push_start_mask(BinSpec(), CameraSpec(), np.full((S, S), CameraSpec().distance))
+    allowed = mask.nonzero().squeeze(-1)
+
+    def obs():
+        return {keys.RGB: torch.randint(0, 256, (n, 3, S, S), dtype=torch.uint8, generator=g),
+                keys.DEPTH: 0.8 + 0.1 * torch.rand(n, 1, S, S, generator=g),
+                keys.QUESTION: torch.randint(1, VOCAB, (n, L), generator=g),
+                keys.ACTION_MASK: mask.expand(n, -1).clone(),
+                keys.INFO: {"overlap": torch.rand(n, 50, generator=g)}}
+
+    nxt = obs()
+    nxt.update({keys.REWARD: torch.randn(n, 1, generator=g), "done": torch.zeros(n, 1, dtype=torch.bool),
+                "terminated": torch.zeros(n, 1, dtype=torch.bool), "truncated": torch.zeros(n, 1, dtype=torch.bool)})
+    return TensorDict({**obs(), keys.ACTION: allowed[torch.randint(len(allowed), (n,), generator=g)], "next": nxt}, [n])
+
+
+def learner(lr=1e-3, **loss_cfg):
+    torch.manual_seed(0)
+    net = make_push_qnet(SMALL_NET, vocab_size=VOCAB, camera_distance=0.9)
+    actor = make_q_actor(net, Categorical(actions.NUM_ACTIONS))
+    loss, updater = make_dqn_loss(actor, {"gamma": 0.6, **loss_cfg})
+    opt = torch.optim.Adam([p for p in loss.parameters() if p.requires_grad], lr=lr)
+    return actor, loss, updater, opt
+
+
+@pytest.mark.parametrize("function,double", [("huber", True), ("mse", False)])
+def test_one_update_lowers_the_td_error_on_a_fixed_batch(function, double):
+    _, loss, updater, opt = learner(function=function, double_dqn=double)
+    batch = compact_transitions(transitions(8))
+    before = batch.clone()
+    out = loss(before)
+    opt.zero_grad()
+    out["loss"].backward()
+    opt.step()
+    updater.step()
+    after = batch.clone()
+    loss(after)
+    assert after[keys.TD_ERROR].sum() < before[keys.TD_ERROR].sum()
+
+
+def test_priorities_change_after_an_update(tmp_path):
+    _, loss, updater, opt = learner()
+    rb = make_replay_buffer({"size": 32, "batch_size": 8, "alpha": 0.6, "beta_init": 0.4}, tmp_path / "rb")
+    rb.extend(compact_transitions(transitions(32)))
+    sample = rb.sample()
+    idx = sample["index"]
+    old = torch.tensor([rb.sampler._sum_tree[int(i)] for i in idx])
+    assert "priority_weight" in sample.keys()
+    out = loss(sample)
+    opt.zero_grad()
+    out["loss"].backward()
+    opt.step()
+    rb.update_tensordict_priority(sample)
+    new = torch.tensor([rb.sampler._sum_tree[int(i)] for i in idx])
+    expected = (sample[keys.TD_ERROR].squeeze(-1).double() + rb.sampler._eps) ** 0.6
+    assert not torch.allclose(old, new)
+    assert torch.allclose(new.double(), expected, rtol=1e-4)
+
+
+def test_replay_keeps_only_what_the_loss_reads_compactly(tmp_path):
+    data = transitions(4)
+    stored = compact_transitions(data)
+    assert set(stored.keys(True, True)) == set(REPLAY_KEYS)
+    assert stored[keys.RGB].dtype == torch.uint8 and stored["next", keys.DEPTH].dtype == torch.float16
+    assert (stored[keys.DEPTH].float() - data[keys.DEPTH]).abs().max() < 1e-3     # float16: < 1 mm at 0.9 m
+    per = transition_bytes(stored[0])
+    assert 2 * 3 * S * S < per < 2 * (3 * S * S + 2 * S * S + actions.NUM_ACTIONS) + 1024   # uint8 rgb, 2-byte depth
+    # the loss runs on what the replay stores
+    _, loss, _, _ = learner()
+    loss(stored)
+    with pytest.raises(ValueError, match="buffer.storage"):
+        make_replay_buffer({"size": 8, "batch_size": 4, "storage": "floppy"}, tmp_path)
+    with pytest.raises(ValueError, match="must be ≥"):
+        make_replay_buffer({"size": 2, "batch_size": 4}, tmp_path)
+
+
+def test_is_beta_anneals_to_one_and_bad_loss_configs_fail():
+    assert annealed_is_beta(0.4, 0.0) == 0.4 and annealed_is_beta(0.4, 0.5) == pytest.approx(0.7)
+    assert annealed_is_beta(0.4, 2.0) == 1.0
+    actor = learner()[0]
+    with pytest.raises(ValueError, match="loss.function"):
+        make_dqn_loss(actor, {"function": "hinge"})
+    with pytest.raises(ValueError, match="loss.gamma"):
+        make_dqn_loss(actor, {"gamma": 1.5})
+    with pytest.raises(ValueError, match="target_update.kind"):
+        make_dqn_loss(actor, {"target_update": {"kind": "sometimes"}})

@@ -1,0 +1,178 @@
+"""The push Q-network: its output layout is the env's action layout, cell for cell; masks hold;
+trunk weights files fail clearly."""
+
+import numpy as np
+import pytest
+import torch
+from torchrl.data import Categorical
+
+from mqa_rl import keys
+from mqa_rl.envs import actions
+from mqa_rl.modules.push_policy import make_explorer, make_push_qnet, make_q_actor
+from mqa_rl.modules.push_qnet import PushQNet
+from mqa_rl.modules.trunks import TrunkWeightsError, make_trunk
+from mqa_rl.sim.geometry import BinSpec, CameraSpec
+from torch_threads import one_torch_thread  # noqa: F401  (autouse)
+
+VOCAB, L, S = 30, 8, 224
+
+
+def _obs(batch=(), seed=0):
+    g = torch.Generator().manual_seed(seed)
+    return (torch.randint(0, 256, (*batch, 3, S, S), dtype=torch.uint8, generator=g),
+            0.8 + 0.1 * torch.rand(*batch, 1, S, S, generator=g),
+            torch.randint(1, VOCAB, (*batch, L), generator=g))
+
+
+def test_action_layout_round_trip():
+    seen = set()
+    for a in range(actions.NUM_PUSHES):
+        d, r, c = actions.decode(a)
+        assert actions.encode(d, r, c) == a
+        seen.add((d, r, c))
+    assert len(seen) == actions.NUM_PUSHES and actions.STOP == actions.NUM_ACTIONS - 1 == 6272
+    with pytest.raises(ValueError):
+        actions.decode(actions.STOP)
+
+
+def test_flat_output_is_channel_row_col_then_stop():
+    torch.manual_seed(0)
+    net = PushQNet(VOCAB, camera_distance=0.9, trunk="light", head_context=1, coords=True).eval()
+    rgb, depth, q = _obs((2, 3))
+    with torch.no_grad():
+        flat = net(rgb, depth, q)
+        maps = net.q_map(rgb.flatten(0, 1), depth.flatten(0, 1), q.flatten(0, 1)).view(2, 3, 9, 28, 28)
+    assert flat.shape == (2, 3, actions.NUM_ACTIONS)
+    for d, r, c in [(0, 0, 0), (3, 10, 14), (7, 27, 27), (5, 2, 25)]:
+        assert torch.allclose(flat[..., actions.encode(d, r, c)], maps[:, :, d, r, c])
+    assert torch.allclose(flat[..., actions.STOP], maps[:, :, 8].mean((-2, -1)), atol=1e-6)
+
+
+@pytest.mark.parametrize("trunk,downsample", [("light", 1), ("light", 2), ("resnet18", 1)])
+@pytest.mark.parametrize("d,row,col", [(2, 14, 10), (6, 9, 20)])
+def test_feature_cell_is_centred_on_the_image_cell(trunk, downsample, d, row, col):
+    """The input pixels that Q[d, row, col] depends on are centred on grid cell (row, col).
+
+    GroupNorm statistics tie every output to the whole image, so the light trunk's norms are
+    replaced by identities here: the alignment is a property of the convolutions and the shift."""
+    torch.manual_seed(0)
+    with pytest.warns(UserWarning, match="random") if trunk != "light" else _nullcontext():
+        net = PushQNet(VOCAB, camera_distance=0.9, trunk=trunk, fuse_channels=(32,), head_context=0, coords=False,
+                       light_downsample=downsample)
+    for t in (net.rgb_trunk, net.depth_trunk):
+        for i, m in enumerate(t.body):
+            if isinstance(m, torch.nn.GroupNorm):
+                t.body[i] = torch.nn.Identity()
+    rgb, depth, q = _obs((1,))
+    x = rgb.float().requires_grad_(True)
+    h = depth.clone().requires_grad_(True)
+    net(x, h, q)[0, actions.encode(d, row, col)].backward()
+    cell = S / actions.GRID
+    for grad in (x.grad, h.grad):
+        ys, xs = np.nonzero(grad[0].abs().sum(0).numpy())
+        centre_v, centre_u = (ys.min() + ys.max()) / 2 + 0.5, (xs.min() + xs.max()) / 2 + 0.5   # continuous coords
+        assert abs(centre_v - (row + 0.5) * cell) <= 0.5 and abs(centre_u - (col + 0.5) * cell) <= 0.5
+
+
+class _nullcontext:
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *a):
+        return False
+
+
+def test_env_executes_the_push_of_the_flat_index(small_dataset):
+    """Index d·784 + row·28 + col starts from image cell (row, col) and moves along direction d."""
+    from mqa_rl.envs.sapien_bin import SapienBinEnv
+
+    env = SapienBinEnv(small_dataset, split=None, difficulties=["easy"], seed=0, max_pushes=3)
+    cell = env.camera.width / actions.GRID
+    for d, row, col in [(0, 14, 8), (3, 10, 18)]:
+        td = env.reset()
+        td[keys.ACTION] = torch.tensor(actions.encode(d, row, col))
+        nxt = env.step(td)["next"]
+        uv = np.asarray(env.camera.project(nxt[keys.PUSH_START].numpy())[0])
+        assert col * cell <= uv[0] < (col + 1) * cell and row * cell <= uv[1] < (row + 1) * cell, (uv, row, col)
+        move = (nxt[keys.PUSH_END] - nxt[keys.PUSH_START]).numpy()[:2]
+        assert np.dot(move / np.linalg.norm(move), actions.direction_xy(d)) > 0.99
+
+
+def _empty_bin_depth(camera):
+    return np.full((camera.height, camera.width), camera.distance)    # the floor everywhere
+
+
+def test_action_mask_allows_pushes_starting_inside_the_bin(small_dataset):
+    from mqa_rl.envs.sapien_bin import SapienBinEnv
+
+    env = SapienBinEnv(small_dataset, split=None, difficulties=["hard"], seed=0)
+    td = env.reset()
+    mask = td[keys.ACTION_MASK]
+    spec = env.observation_spec[keys.ACTION_MASK]                     # declared in the specs
+    assert spec.shape == mask.shape and spec.dtype == torch.bool and spec.is_in(mask) and mask[actions.STOP]
+    cells = mask[: actions.GRID ** 2].view(actions.GRID, actions.GRID)
+    for d in range(actions.DIRECTIONS):                                # the same cells for every direction
+        assert torch.equal(mask[d * 784:(d + 1) * 784].view(28, 28), cells)
+    start = actions.push_start_points(td[keys.DEPTH][0].numpy(), env.camera)
+    b = env.dataset.bin
+    inside = (np.abs(start[..., 0]) <= b.half - 0.005) & (np.abs(start[..., 1]) <= b.half - 0.005)
+    assert np.array_equal(cells.numpy(), inside)
+    assert 0.05 < 1 - cells.float().mean().item() < 0.7
+    # the env pushes from exactly that start point (the pusher keeps its finger 12 mm off the walls)
+    interior = (np.abs(start[..., :2]) <= b.half - 0.02).all(-1)
+    r, c = map(int, np.argwhere(interior & (start[..., 2] > 0.01))[0])  # an allowed cell on an object
+    nxt = env.step(td.set(keys.ACTION, torch.tensor(actions.encode(0, r, c))))["next"]
+    assert np.allclose(nxt[keys.PUSH_START].numpy()[:2], start[r, c, :2], atol=2e-3)
+    # after the push the mask follows the new depth image
+    assert torch.equal(nxt[keys.ACTION_MASK], actions.push_start_mask(b, env.camera, nxt[keys.DEPTH][0].numpy()))
+    # another bin size, another mask (an empty bin: the floor everywhere)
+    small = actions.push_start_mask(BinSpec(inner_size=0.30), env.camera, _empty_bin_depth(env.camera))
+    large = actions.push_start_mask(BinSpec(inner_size=0.40), env.camera, _empty_bin_depth(env.camera))
+    assert small[:784].sum() < large[:784].sum() and not (small & ~large).any()
+
+
+def test_masked_actions_are_never_chosen():
+    torch.manual_seed(0)
+    spec = Categorical(actions.NUM_ACTIONS)
+    net = make_push_qnet({"trunk": "light", "fuse_channels": [16, 8], "head_channels": [8]}, vocab_size=VOCAB,
+                         camera_distance=0.9)
+    actor = make_q_actor(net, spec)
+    with torch.no_grad():       # make the masked cells the most attractive ones
+        net.head[-1][-1].bias.fill_(0.0)
+    explorer = make_explorer(actor, spec, eps_init=1.0, eps_end=1.0, annealing_frames=1)
+    rgb, depth, q = _obs((64,))
+    geometry = actions.push_start_mask(BinSpec(), CameraSpec(), _empty_bin_depth(CameraSpec()))
+    for mask in (geometry, torch.zeros(actions.NUM_ACTIONS, dtype=torch.bool).index_fill_(0, torch.tensor([5, 900, 6272]), True)):
+        from tensordict import TensorDict
+
+        td = TensorDict({keys.RGB: rgb, keys.DEPTH: depth, keys.QUESTION: q,
+                         keys.ACTION_MASK: mask.expand(64, -1).clone()}, [64])
+        with torch.no_grad():
+            greedy = actor(td.clone())[keys.ACTION]
+            random = explorer(td.clone())[keys.ACTION]
+        assert mask[greedy].all() and mask[random].all()
+        assert random.unique().numel() > 1                 # ε = 1 really explores
+
+
+def test_trunk_weights_files(tmp_path):
+    import torchvision
+
+    with pytest.raises(TrunkWeightsError, match="does not exist"):
+        make_trunk("resnet18", tmp_path / "missing.pth")
+    good = tmp_path / "resnet18.pth"
+    reference = torchvision.models.resnet18()
+    torch.save(reference.state_dict(), good)
+    trunk = make_trunk("resnet18", good)
+    assert torch.equal(trunk.body[0].weight, reference.conv1.weight)
+    with pytest.raises(TrunkWeightsError, match="not a torchvision resnet101 state dict"):
+        make_trunk("resnet101", good)
+    junk = tmp_path / "junk.pth"
+    junk.write_bytes(b"not a checkpoint")
+    with pytest.raises(TrunkWeightsError, match="cannot read"):
+        make_trunk("resnet18", junk)
+    with pytest.raises(TrunkWeightsError, match="no pretrained"):
+        make_trunk("light", good)
+    with pytest.raises(ValueError, match="unknown trunk"):
+        make_trunk("vgg", None)
+    with pytest.raises(ValueError, match="unknown model config keys"):
+        make_push_qnet({"trunk": "light", "trunc": 1}, vocab_size=VOCAB, camera_distance=0.9)

@@ -1,0 +1,158 @@
+"""recipes/train_dqn.py end to end as a user runs it: a tiny run with its evaluation, videos and
+curves; clear errors for bad configs; SIGKILL then resume; no worker outlives the run."""
+
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).parents[1]
+TRAIN = str(ROOT / "recipes" / "train_dqn.py")
+ENV = {**os.environ, "PYTHONPATH": str(ROOT), "WANDB_MODE": "offline", "WANDB_SILENT": "true"}
+
+
+def _run(*args, cwd, ok=True, timeout=600):
+    out = subprocess.run([sys.executable, *args], cwd=cwd, capture_output=True, text=True, timeout=timeout, env=ENV)
+    if ok:
+        assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-3000:]
+    return out
+
+
+def _scalars(run: Path, name: str) -> list[tuple[float, float]]:
+    with open(run / "csv" / "scalars" / f"{name}.csv") as f:
+        return [(float(s), float(v)) for s, v in csv.reader(f)]
+
+
+@pytest.mark.timeout(900)
+def test_tiny_training_run_evaluation_and_curves(small_dataset_dir, tmp_path):
+    run = tmp_path / "run"
+    out = _run(TRAIN, "profile=smoke", f"dataset={small_dataset_dir}", f"out_dir={run}", "threads=1", cwd=tmp_path)
+    assert "done: {'frames': 32, 'updates': 6" in out.stdout
+    for name in ("train/reward", "train/loss", "train/mean_q", "train/epsilon", "train/beta", "train/pushes",
+                 "train/stop_rate", "train/chi_start", "train/chi_end", "time/env_steps_per_s", "time/updates_per_s",
+                 "eval/reward", "eval/hidden_end", "train/term/exploration"):
+        rows = _scalars(run, name)
+        assert rows and all(v == v for _, v in rows), name
+    eps = [v for _, v in _scalars(run, "train/epsilon")]
+    assert eps[0] > eps[-1]                                           # ε anneals with frames
+    assert (run / "config.yaml").exists() and list((run / "checkpoints").glob("checkpoint-*32"))
+    assert list((run / "media").glob("eval_qmap_*.png")) and list((run / "media").glob("eval_*_0.gif"))
+    # the same out_dir again without resume=true is refused, not overwritten
+    again = _run(TRAIN, "profile=smoke", f"dataset={small_dataset_dir}", f"out_dir={run}", cwd=tmp_path, ok=False)
+    assert again.returncode != 0 and "resume=true" in again.stderr
+    # greedy vs random on the test split, and the Fig. 7 curves
+    ev = tmp_path / "eval"
+    _run(str(ROOT / "recipes" / "evaluate_policy.py"), f"run={run}", "episodes_per_level=2", "difficulties=[easy]",
+         "policies=[greedy,random]", "video_episodes=1", "video_format=gif", f"out_dir={ev}", cwd=tmp_path)
+    res = json.loads((ev / "results.json").read_text())
+    assert res["easy"]["greedy"]["chi_end"]["n"] <= 2 and "greedy-random" in res["easy"]
+    assert (ev / "videos" / "easy_0.gif").stat().st_size > 0
+    _run(str(ROOT / "recipes" / "plot_curves.py"), str(run), "--out", str(tmp_path / "fig7.png"), cwd=tmp_path)
+    assert (tmp_path / "fig7.png").stat().st_size > 0
+
+
+def test_bad_configs_fail_clearly(small_dataset_dir, tmp_path):
+    base = ["profile=smoke", f"dataset={small_dataset_dir}", "threads=1"]
+    cases = [
+        (["collector.total_frames=30", f"out_dir={tmp_path / 'a'}"], "multiple of"),
+        ([f"out_dir={tmp_path / 'b'}", "dataset=/nonexistent/mqa"], "make_dataset.py"),
+        ([f"out_dir={tmp_path / 'c'}", "trunk=resnet18", f"model.weights={tmp_path / 'no.pth'}"], "does not exist"),
+        ([f"out_dir={tmp_path / 'e'}", "trunk=vgg"], "trunk"),
+    ]
+    for overrides, message in cases:
+        out = _run(TRAIN, *base, *overrides, cwd=tmp_path, ok=False)
+        assert out.returncode != 0 and message in out.stderr, (overrides, out.stderr[-2000:])
+
+
+def _children(pid: int) -> set[int]:
+    out = subprocess.run(["ps", "-o", "pid=", "--ppid", str(pid)], capture_output=True, text=True).stdout
+    kids = {int(p) for p in out.split()}
+    for k in list(kids):
+        kids |= _children(k)
+    return kids
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    stat = Path(f"/proc/{pid}/stat")
+    return stat.exists() and stat.read_text().split()[2] != "Z"
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(1200)
+@pytest.mark.parametrize("collector", ["single", "multi_sync"])
+def test_sigkill_then_resume_loses_and_repeats_nothing(small_dataset_dir, tmp_path, collector):
+    run = tmp_path / "run"
+    args = [TRAIN, "profile=smoke", f"dataset={small_dataset_dir}", f"out_dir={run}", "threads=1",
+            f"collector={collector}", "collector.total_frames=64", "checkpoint.interval_frames=16",
+            "buffer.size=128", "eval.interval_frames=64"]
+    proc = subprocess.Popen([sys.executable, *args], cwd=tmp_path, env=ENV, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    workers: set[int] = set()
+    deadline = time.time() + 600
+    try:
+        while time.time() < deadline and not list((run / "checkpoints").glob("checkpoint-*")):
+            workers |= _children(proc.pid)
+            assert proc.poll() is None, proc.stdout.read()[-3000:]
+            time.sleep(0.2)
+        workers |= _children(proc.pid)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    if collector != "single":
+        assert len(workers) >= 2, "the worker processes were not seen"
+    killed_at = max(int(p.name.split("-")[1]) for p in (run / "checkpoints").glob("checkpoint-*"))
+    assert killed_at < 64
+    for _ in range(100):                                    # orphaned workers notice and exit
+        if not any(_alive(w) for w in workers):
+            break
+        time.sleep(0.3)
+    leftover = [w for w in workers if _alive(w)]
+    for w in leftover:
+        os.kill(w, signal.SIGKILL)
+    assert not leftover, f"worker processes outlived the killed run: {leftover}"
+
+    out = _run(*args, "resume=true", cwd=tmp_path)
+    assert f"resumed from" in out.stdout and "'frames': 64" in out.stdout
+    # updates from the batch that reaches 16 frames on, 2 per batch of 8: 7 batches x 2, as without the kill
+    assert "'updates': 14" in out.stdout
+    for name in ("train/epsilon", "train/updates", "time/env_steps_per_s"):
+        steps = [s for s, _ in _scalars(run, name)]
+        assert steps == sorted(set(steps)) and steps[-1] == 64, (name, steps)      # none repeated
+        assert steps == list(range(8, 65, 8)), (name, steps)                        # none lost
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+def test_collector_workers_shut_down_when_the_loop_fails(small_dataset_dir):
+    import torch
+
+    from mqa_rl.collectors.factory import make_collector, running
+    from mqa_rl.modules.random_policy import RandomMQAPolicy
+
+    env_kwargs = {"dataset": str(small_dataset_dir), "split": None, "difficulties": ["easy"], "max_pushes": 2}
+    coll = make_collector({"kind": "multi_sync", "num_workers": 2, "frames_per_batch": 4, "learner_threads": 1},
+                          RandomMQAPolicy(2), env_kwargs, total_frames=40)
+    procs = list(coll.procs)
+    n = torch.get_num_threads()
+    try:
+        with pytest.raises(RuntimeError, match="boom"), running(coll):
+            for data in coll:
+                assert data.numel() == 4
+                raise RuntimeError("boom")
+    finally:
+        torch.set_num_threads(n)
+    for p in procs:
+        p.join(30)
+        assert not p.is_alive()
