@@ -2,7 +2,7 @@
 
     python benchmarks/arm_pusher.py reach                       # IK over the 28 x 28 x 8 grid pushes (~15 min)
     python benchmarks/arm_pusher.py steps --dataset data/mqa    # finger vs arm: step time, tip error (same actions)
-    python benchmarks/arm_pusher.py transfer --dataset data/mqa [--policy pkg.module:make --checkpoint ckpt.pt]
+    python benchmarks/arm_pusher.py transfer --dataset data/mqa  # random baseline with each pusher
 
 * ``reach``: every grid push (cell centre → the start point at a surface height, 8 directions, the env's
   push length) planned by inverse kinematics without physics; the fraction fully reachable, per height
@@ -10,16 +10,15 @@
 * ``steps``: the same random push sequence on each level with the finger and with the arm, in one
   process: step time (median / p90), and for the arm the tip's distance to the push line (mean / max
   over pushes of the per-push mean and max), unreachable pushes and arm-part contacts.
-* ``transfer``: target χ reduction (mean target overlap at reset minus at the end) on the test split's
-  COUNTING questions, with each pusher. The policy is the random baseline unless ``--policy
-  module:function`` names a factory ``function(checkpoint, env) -> policy`` (a TensorDict module that
-  writes ``action``) for the ``--checkpoint`` file, e.g. a trained greedy DQN.
+* ``transfer``: target χ reduction (mean target overlap at reset minus at the end) of the random
+  baseline on the test split's COUNTING questions, with each pusher (the same seeded actions). For a
+  trained policy: ``recipes/evaluate_policy.py run=<train_dqn run> pusher=finger`` and ``pusher=arm``
+  (its ``chi_change`` column).
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib
 import time
 
 import numpy as np
@@ -83,19 +82,10 @@ def steps(dataset: str, pushes: int, seed: int) -> None:
               f"{e[:, 0].mean():>14.1f} / {e[:, 1].mean():<5.1f}{e[:, 1].max():>19.1f}{a[3]:>8d}{a[4]:>8d}", flush=True)
 
 
-def load_policy(spec: str | None, checkpoint: str | None, env, seed: int):
-    if spec is None:
-        return RandomMQAPolicy(env.max_pushes, seed=seed)
-    module, _, name = spec.partition(":")
-    if not name:
-        raise ValueError(f"--policy must look like 'package.module:function', got {spec!r}")
-    return getattr(importlib.import_module(module), name)(checkpoint, env)
-
-
-def transfer(dataset: str, episodes: int, seed: int, policy: str | None, checkpoint: str | None) -> None:
+def transfer(dataset: str, episodes: int, seed: int) -> None:
     for pusher in ("finger", "arm"):
         env = SapienBinEnv(dataset, split="test", question_types=["counting"], seed=seed, max_pushes=10, pusher=pusher)
-        pol = load_policy(policy, checkpoint, env, seed)
+        pol = RandomMQAPolicy(env.max_pushes, seed=seed)
         qs = env.questions[:: max(len(env.questions) // episodes, 1)][:episodes]
         reductions, t0 = [], time.perf_counter()
         for q in qs:
@@ -109,8 +99,7 @@ def transfer(dataset: str, episodes: int, seed: int, policy: str | None, checkpo
                     td = out.clone()
             if not np.isnan(chi0):
                 reductions.append(chi0 - _target_overlap(out))
-        name = policy or "random baseline"
-        print(f"{pusher:<7} {name}: target χ reduction {np.mean(reductions):+.4f} ± {np.std(reductions) / np.sqrt(len(reductions)):.4f} "
+        print(f"{pusher:<7} random baseline: target χ reduction {np.mean(reductions):+.4f} ± {np.std(reductions) / np.sqrt(len(reductions)):.4f} "
               f"over {len(reductions)} test episodes ({time.perf_counter() - t0:.0f} s)", flush=True)
 
 
@@ -127,15 +116,13 @@ def main() -> None:
     ap.add_argument("--pushes", type=int, default=30)
     ap.add_argument("--episodes", type=int, default=30)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--policy", default=None)
-    ap.add_argument("--checkpoint", default=None)
     args = ap.parse_args()
     if args.what == "reach":
         reach(args.heights)
     elif args.what == "steps":
         steps(args.dataset, args.pushes, args.seed)
     else:
-        transfer(args.dataset, args.episodes, args.seed, args.policy, args.checkpoint)
+        transfer(args.dataset, args.episodes, args.seed)
 
 
 if __name__ == "__main__":

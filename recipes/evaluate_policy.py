@@ -2,6 +2,7 @@
 
     python recipes/evaluate_policy.py run=outputs/train_dqn/local/2026-11-22_09-00-00
     python recipes/evaluate_policy.py run=... policies=[greedy] episodes_per_level=3 video_episodes=3
+    python recipes/evaluate_policy.py run=... pusher=arm      # the same policy pushing with the Panda arm
 
 Per level and policy, over the same questions (the env is seeded alike for every policy): mean
 episode reward, pushes, fraction of episodes ending in a simple scene, change of the targets' mean
@@ -75,7 +76,7 @@ def main(cfg: DictConfig) -> None:
     results, lines = {}, []
     for level in cfg.difficulties:
         env = make_mqa_env(str(dataset), reward, episode_stats=True, split=cfg.split, difficulties=[level],
-                           question_types=qtypes, max_pushes=max_pushes)
+                           question_types=qtypes, max_pushes=max_pushes, pusher=cfg.pusher)
         per_policy = {}
         for name in cfg.policies:
             env.base_env.set_seed(cfg.seed)                 # the same questions for every policy
