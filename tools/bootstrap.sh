@@ -24,11 +24,11 @@ if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
     log "installing pinned packages (first run: several GB, a few minutes; log: $VENV/pip-install.log)"
     # Lines of the lock marked "# no-deps" are installed without their dependencies: of mani_skill
     # (the arm's robot assets, the 'arm' extra) only the asset files are used, not its heavy stack.
-    grep -v -- '# no-deps' "$LOCK" > "$VENV/requirements.core.txt"
-    grep -- '# no-deps' "$LOCK" | sed 's/#.*//' > "$VENV/requirements.no-deps.txt"
+    { grep -v -- '# no-deps' "$LOCK" || true; } > "$VENV/requirements.core.txt"
+    { grep -- '# no-deps' "$LOCK" || true; } | sed 's/#.*//' > "$VENV/requirements.no-deps.txt"
     if ! { "$VENV/bin/python" -m pip install --upgrade pip \
            && "$VENV/bin/python" -m pip install -r "$VENV/requirements.core.txt" \
-           && "$VENV/bin/python" -m pip install --no-deps -r "$VENV/requirements.no-deps.txt" \
+           && { [ ! -s "$VENV/requirements.no-deps.txt" ] || "$VENV/bin/python" -m pip install --no-deps -r "$VENV/requirements.no-deps.txt"; } \
            && "$VENV/bin/python" -m pip install --no-deps -e "$ROOT"; } > "$VENV/pip-install.log" 2>&1; then
         tail -n 30 "$VENV/pip-install.log" >&2
         log "ERROR: package installation failed (full log: $VENV/pip-install.log)"
