@@ -61,7 +61,7 @@ def run_episode(env: SapienBinEnv, question, policy) -> tuple[dict, int]:
 
 
 def collect(ds: MQADataset, split: str, policies: list[str], random_episodes: int, max_scenes: int | None, seed: int,
-            lookahead: int, levels=LEVELS, min_visible_fraction: float = 0.3):
+            lookahead: int, levels=LEVELS, min_visible_fraction: float = 0.0):
     env = SapienBinEnv(ds, split=split, question_types=["counting"], seed=seed)
     privileged = PrivilegedPushPolicy(env, lookahead=lookahead, min_visible_fraction=min_visible_fraction)
     rand = RandomMQAPolicy(max_pushes=env.max_pushes, seed=seed)

@@ -54,12 +54,21 @@ def _f32(x: np.ndarray) -> np.ndarray:
     return np.asarray(x, np.float32).astype(np.float64)
 
 
+def _bounding_radius(asset: ObjectAsset) -> float:
+    return float(np.linalg.norm(asset.dimensions) / 2)
+
+
+def _pile_top(world) -> float:
+    """An upper bound of the pile's height: the highest centre plus that object's bounding radius."""
+    return max((p[2] + _bounding_radius(a) for p, a in zip(world.poses(), world.assets)), default=0.0)
+
+
 def _column_poses(rng: np.random.Generator, assets: list[ObjectAsset], base_z: float, point: np.ndarray,
                   bin_spec: BinSpec) -> np.ndarray:
     """Poses for one wave: a column above ``point``, each object's bounding sphere clear of the one
     below, xy jittered by ``DROP_SPREAD`` (kept inside the walls), random orientations."""
     n = len(assets)
-    radius = np.array([np.linalg.norm(a.dimensions) / 2 for a in assets])
+    radius = np.array([_bounding_radius(a) for a in assets])
     lim = bin_spec.half - radius[:, None]
     offset = rng.normal(0.0, DROP_SPREAD, (n, 2))
     if SLEEVE_SIZE:
@@ -90,15 +99,13 @@ def settle_scene(
         sleeve = add_sleeve(world, point, SLEEVE_SIZE, DROP_WALL_HEIGHT) if SLEEVE_SIZE else []
         for start in range(0, len(chosen), WAVE):
             wave = chosen[start:start + WAVE]
-            top = max((p[2] + np.linalg.norm(a.dimensions) / 2 for p, a in zip(world.poses(), world.assets)), default=0.0)
-            for asset, pose in zip(wave, _column_poses(rng, wave, top, point, bin_spec)):
+            for asset, pose in zip(wave, _column_poses(rng, wave, _pile_top(world), point, bin_spec)):
                 add_object(world, asset, pose)
             world.step(WAVE_STEPS)
             steps += WAVE_STEPS
         if sleeve:
             steps += world.settle(MAX_SETTLE_STEPS)
-            pile_top = max(p[2] + np.linalg.norm(a.dimensions) / 2 for p, a in zip(world.poses(), world.assets))
-            steps += lift_sleeve(world, sleeve, SLEEVE_LIFT_SPEED, pile_top + 0.05)
+            steps += lift_sleeve(world, sleeve, SLEEVE_LIFT_SPEED, _pile_top(world) + 0.05)
         steps += world.settle(MAX_SETTLE_STEPS)
         poses = _f32(world.poses())
         for _ in range(VERIFY_ROUNDS):

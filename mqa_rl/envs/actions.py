@@ -67,6 +67,10 @@ def push_start_mask(bin_spec, camera, depth: np.ndarray, margin: float = 0.005) 
     the bin, the camera and the current depth image only, so it follows whatever geometry the
     dataset has. The same cells are allowed in every direction; stop is always allowed.
     """
-    start = push_start_points(depth, camera)
+    return start_points_mask(bin_spec, push_start_points(depth, camera), margin)
+
+
+def start_points_mask(bin_spec, start: np.ndarray, margin: float = 0.005) -> torch.Tensor:
+    """``push_start_mask`` from already computed start points [GRID, GRID, 3]."""
     inside = torch.from_numpy(bin_spec.inside(start, margin=margin).reshape(-1))
     return torch.cat([inside.repeat(DIRECTIONS), torch.ones(1, dtype=torch.bool)])

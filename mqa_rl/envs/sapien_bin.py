@@ -230,11 +230,7 @@ class SapienBinEnv(EnvBase):
 
     def _execute_push(self, action: int) -> PushResult:
         d, row, col = actions.decode(action)
-        uv = actions.cell_centre_uv(row, col, self.camera.height, self.camera.width)
-        depth = self._depth[min(int(uv[1]), self.camera.height - 1), min(int(uv[0]), self.camera.width - 1)]
-        if depth <= 0:                    # nothing hit: use the floor
-            depth = self.camera.distance
-        start = self.camera.unproject(uv, np.float64(depth))
+        start = self._starts[row, col]                 # the surface under the cell, from the last depth image
         result = self.pusher.push(self.world, start, actions.direction_xy(d), self.push_length)
         self.world.settle(self.settle_steps, check_every=8, speed_tol=self.settle_speed)
         return result
@@ -256,7 +252,7 @@ class SapienBinEnv(EnvBase):
         the episode's question / scene ids and push count."""
         if self.world is None:
             raise RuntimeError("call reset() before ground_truth()")
-        m = self.measure()
+        m = dict(self._last_measure)               # the scene has not changed since it was observed
         m.update(masks=self._projector.masks(m["poses"]), entity_ids=self.world.entity_ids(), target=self._target.copy(),
                  question_id=self.question.id, scene_id=self.question.scene_id, push_count=self._push_count)
         return m
@@ -278,7 +274,8 @@ class SapienBinEnv(EnvBase):
 
     def _observe(self, push: PushResult | None) -> TensorDict:
         m = self.measure()
-        self._depth = m["depth"]
+        self._last_measure = m
+        self._starts = actions.push_start_points(m["depth"], self.camera)
         n, k = len(m["poses"]), MAX_OBJECTS
 
         def pad(x, dtype):
@@ -307,7 +304,7 @@ class SapienBinEnv(EnvBase):
                 keys.RGB: torch.from_numpy(np.ascontiguousarray(m["rgb"].transpose(2, 0, 1))),
                 keys.DEPTH: torch.from_numpy(m["depth"][None].copy()),
                 keys.QUESTION: self._tokens.clone(),
-                keys.ACTION_MASK: actions.push_start_mask(self.dataset.bin, self.camera, m["depth"]),
+                keys.ACTION_MASK: actions.start_points_mask(self.dataset.bin, self._starts),
                 keys.INFO: info,
             },
             batch_size=[],

@@ -120,9 +120,14 @@ class BinWorld:
         return rgb, depth, seg
 
 
-def _static_box(scene: sapien.Scene, half_size, position, rgba, render: bool) -> sapien.Entity:
+def _static_box(scene: sapien.Scene, half_size, position, rgba, render: bool, kinematic: bool = False) -> sapien.Entity:
+    """A box that does not fall: static (bin walls, floor), or kinematic when it must move (the sleeve)."""
     entity = sapien.Entity()
-    body = sapien.physx.PhysxRigidStaticComponent()
+    if kinematic:
+        body = sapien.physx.PhysxRigidDynamicComponent()
+        body.kinematic = True
+    else:
+        body = sapien.physx.PhysxRigidStaticComponent()
     shape = sapien.physx.PhysxCollisionShapeBox(np.asarray(half_size, np.float32), sapien.physx.PhysxMaterial(*OBJECT_MATERIAL))
     shape.contact_offset = CONTACT_OFFSET
     body.attach(shape)
@@ -179,11 +184,8 @@ def build_world(
         scene = sapien.Scene([sapien.physx.PhysxCpuSystem()])
     scene.set_timestep(TIMESTEP)
 
-    h, t, wh = bin_spec.half, bin_spec.wall_thickness, bin_spec.wall_height
     _static_box(scene, [1.0, 1.0, 0.05], [0, 0, -0.05], FLOOR_COLOR, render)   # floor top at z = 0
-    for sx, sy in ((1, 0), (-1, 0), (0, 1), (0, -1)):
-        half = [t / 2, h + t, wh / 2] if sx else [h + t, t / 2, wh / 2]
-        _static_box(scene, half, [sx * (h + t / 2), sy * (h + t / 2), wh / 2], WALL_COLOR, render)
+    _square_walls(scene, (0.0, 0.0), bin_spec.inner_size, bin_spec.wall_height, bin_spec.wall_thickness, render)
 
     cam = None
     if render:
@@ -198,25 +200,23 @@ def build_world(
     return world
 
 
-def add_sleeve(world: BinWorld, centre, inner_size: float, height: float, thickness: float = 0.01) -> list[sapien.Entity]:
-    """Four temporary kinematic walls around ``centre`` (xy): a square tube of ``inner_size`` standing
-    on the floor, into which scene generation pours objects before lifting it (``lift_sleeve``)."""
+def _square_walls(scene: sapien.Scene, centre, inner_size: float, height: float, thickness: float, render: bool,
+                  kinematic: bool = False) -> list[sapien.Entity]:
+    """Four walls standing on the floor around ``centre`` (xy), ``inner_size`` apart inside."""
     cx, cy = float(centre[0]), float(centre[1])
     h, t = inner_size / 2, thickness
     walls = []
     for sx, sy in ((1, 0), (-1, 0), (0, 1), (0, -1)):
         half = [t / 2, h + t, height / 2] if sx else [h + t, t / 2, height / 2]
-        entity = sapien.Entity()
-        body = sapien.physx.PhysxRigidDynamicComponent()
-        shape = sapien.physx.PhysxCollisionShapeBox(np.asarray(half, np.float32), sapien.physx.PhysxMaterial(*OBJECT_MATERIAL))
-        shape.contact_offset = CONTACT_OFFSET
-        body.attach(shape)
-        body.kinematic = True
-        entity.add_component(body)
-        entity.pose = sapien.Pose(np.asarray([cx + sx * (h + t / 2), cy + sy * (h + t / 2), height / 2], np.float32))
-        world.scene.add_entity(entity)
-        walls.append(entity)
+        pos = [cx + sx * (h + t / 2), cy + sy * (h + t / 2), height / 2]
+        walls.append(_static_box(scene, half, pos, WALL_COLOR, render, kinematic))
     return walls
+
+
+def add_sleeve(world: BinWorld, centre, inner_size: float, height: float, thickness: float = 0.01) -> list[sapien.Entity]:
+    """Four temporary kinematic walls around ``centre`` (xy): a square tube of ``inner_size`` standing
+    on the floor, into which scene generation pours objects before lifting it (``lift_sleeve``)."""
+    return _square_walls(world.scene, centre, inner_size, height, thickness, world.camera is not None, kinematic=True)
 
 
 def lift_sleeve(world: BinWorld, walls: list[sapien.Entity], speed: float, height: float) -> int:
