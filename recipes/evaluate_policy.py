@@ -8,7 +8,11 @@ Per level and policy, over the same questions (the env is seeded alike for every
 episode reward, pushes, fraction of episodes ending in a simple scene, change of the targets' mean
 hidden fraction χ from the first to the last image, fraction of targets fully hidden at the end —
 each with a 95 % interval; and greedy − random differences paired by question. Writes
-``results.json``, ``results.md`` and videos (Q maps beside the frames) to ``out_dir``.
+``results.json``, ``results.md``, the per-episode metrics (``episodes/<policy>_<level>.pt``) and
+videos (Q maps beside the frames) to ``out_dir``. ``baseline_from=<an earlier out_dir>`` reuses that
+evaluation's random episodes when they were run on the same questions (same dataset, split, seed,
+episodes, push limit, question types, pusher): the χ metrics carry over, the reward only if the
+reward config matches too (else it is left out).
 """
 
 from __future__ import annotations
@@ -33,6 +37,37 @@ from mqa_rl.modules.random_policy import RandomMQAPolicy
 from mqa_rl.training.checkpoint import CheckpointCorrupt
 
 REPORTED = ("reward", "pushes", "final_simple", "chi_end", "chi_change", "hidden_end", "stopped")
+
+
+def episodes_meta(cfg: DictConfig, dataset, level: str, qtypes, max_pushes: int, reward: dict) -> dict:
+    """What makes two evaluations' episodes the same questions (and the same reward)."""
+    return {"dataset": str(Path(dataset).resolve()), "split": cfg.split, "seed": int(cfg.seed), "level": level,
+            "episodes": int(cfg.episodes_per_level), "max_pushes": max_pushes, "pusher": cfg.pusher,
+            "question_types": list(qtypes) if qtypes else None, "reward": reward}
+
+
+def reuse_baseline(folder, name: str, meta: dict) -> dict[str, torch.Tensor] | None:
+    """The per-episode metrics of policy ``name`` from an earlier evaluation, if on the same questions."""
+    path = Path(folder) / "episodes" / f"{name}_{meta['level']}.pt"
+    if not path.is_file():
+        return None
+    saved = torch.load(path, weights_only=False)
+    same = {k: v for k, v in meta.items() if k != "reward"}
+    if {k: saved["meta"].get(k) for k in same} != same:
+        print(f"  {path}: other questions or settings, not reused")
+        return None
+    metrics = dict(saved["metrics"])
+    if saved["meta"].get("reward") != meta["reward"]:   # another reward config: its rewards don't compare
+        metrics = {k: v for k, v in metrics.items() if k != "reward" and not k.startswith("term/")}
+    print(f"  {name}: reused {path}")
+    return metrics
+
+
+def save_atomic(path: Path, write) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.parent / f".{path.name}.tmp{os.getpid()}"
+    write(tmp)
+    os.replace(tmp, path)
 
 
 def load_greedy(run: Path, checkpoint: str | None, env):
@@ -78,9 +113,11 @@ def main(cfg: DictConfig) -> None:
         env = make_mqa_env(str(dataset), reward, episode_stats=True, split=cfg.split, difficulties=[level],
                            question_types=qtypes, max_pushes=max_pushes, pusher=cfg.pusher)
         per_policy = {}
+        meta = episodes_meta(cfg, dataset, level, qtypes, max_pushes, reward)
         for name in cfg.policies:
             env.base_env.set_seed(cfg.seed)                 # the same questions for every policy
             on_episode = None
+            reused = reuse_baseline(cfg.baseline_from, name, meta) if cfg.baseline_from and name != "greedy" else None
             if name == "greedy":
                 policy, _, ckpt = load_greedy(Path(cfg.run), cfg.checkpoint, env)
 
@@ -92,16 +129,19 @@ def main(cfg: DictConfig) -> None:
                 policy = RandomMQAPolicy(max_pushes, seed=cfg.seed, masked=name == "random_masked")
             else:
                 raise ValueError(f"unknown policy {name!r}; choose among greedy, random, random_masked")
-            m = run_episodes(env, policy, cfg.episodes_per_level, max_pushes=max_pushes, simple_threshold=threshold,
-                             on_episode=on_episode)
+            m = reused if reused is not None else run_episodes(
+                env, policy, cfg.episodes_per_level, max_pushes=max_pushes, simple_threshold=threshold, on_episode=on_episode)
+            save_atomic(out / "episodes" / f"{name}_{level}.pt", lambda p, m=m: torch.save({"meta": meta, "metrics": m}, p))
             per_policy[name] = m
-            results.setdefault(level, {})[name] = {k: dict(zip(("mean", "ci95", "n"), mean_ci95(m[k]))) for k in REPORTED}
+            nan = torch.full((cfg.episodes_per_level,), float("nan"))
+            results.setdefault(level, {})[name] = {k: dict(zip(("mean", "ci95", "n"), mean_ci95(m.get(k, nan))))
+                                                   for k in REPORTED}
             print(f"{level:>6} {name:>13}: " + ", ".join(
                 f"{k} {results[level][name][k]['mean']:+.3f}±{results[level][name][k]['ci95']:.3f}" for k in REPORTED),
                 flush=True)
         if "greedy" in per_policy:
             for base in (p for p in per_policy if p != "greedy"):
-                diff = {k: dict(zip(("mean", "ci95", "n"), mean_ci95(per_policy["greedy"][k] - per_policy[base][k])))
+                diff = {k: dict(zip(("mean", "ci95", "n"), mean_ci95(per_policy["greedy"][k] - per_policy[base].get(k, nan))))
                         for k in REPORTED}
                 results[level][f"greedy-{base}"] = diff
         env.close()
@@ -111,9 +151,7 @@ def main(cfg: DictConfig) -> None:
             lines.append(f"| {name} | " + " | ".join(f"{row[k]['mean']:+.3f} ± {row[k]['ci95']:.3f} (n={row[k]['n']})"
                                                    for k in REPORTED) + " |")
     for name, text in (("results.json", json.dumps(results, indent=2)), ("results.md", "\n".join(lines) + "\n")):
-        tmp = out / f".{name}.tmp{os.getpid()}"
-        tmp.write_text(text)
-        os.replace(tmp, out / name)
+        save_atomic(out / name, lambda p, text=text: p.write_text(text))
     print("\n".join(lines))
     print(f"written to {out}")
 

@@ -53,6 +53,16 @@ def test_tiny_training_run_evaluation_and_curves(small_dataset_dir, tmp_path):
     res = json.loads((ev / "results.json").read_text())
     assert res["easy"]["greedy"]["chi_end"]["n"] <= 2 and "greedy-random" in res["easy"]
     assert (ev / "videos" / "easy_0.gif").stat().st_size > 0
+    # a second evaluation reuses the first one's random episodes (same questions) instead of rerunning
+    ev2 = tmp_path / "eval2"
+    out2 = _run(str(ROOT / "recipes" / "evaluate_policy.py"), f"run={run}", "episodes_per_level=2", "difficulties=[easy]",
+                "policies=[greedy,random]", "video_episodes=0", f"baseline_from={ev}", f"out_dir={ev2}", cwd=tmp_path)
+    assert "random: reused" in out2.stdout
+    assert json.loads((ev2 / "results.json").read_text())["easy"]["random"] == res["easy"]["random"]
+    ev3 = tmp_path / "eval3"                                   # other questions (another seed): not reused
+    out3 = _run(str(ROOT / "recipes" / "evaluate_policy.py"), f"run={run}", "episodes_per_level=2", "difficulties=[easy]",
+                "policies=[random]", "seed=5", f"baseline_from={ev}", f"out_dir={ev3}", cwd=tmp_path)
+    assert "not reused" in out3.stdout
     _run(str(ROOT / "recipes" / "plot_curves.py"), str(run), "--out", str(tmp_path / "fig7.png"), cwd=tmp_path)
     assert (tmp_path / "fig7.png").stat().st_size > 0
 

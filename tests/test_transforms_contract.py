@@ -172,3 +172,21 @@ def test_negative_weights_stay_allowed():
                      keys.LOCAL_OCCLUSION: torch.tensor([0.4]), keys.SIMPLE_SCENE: torch.tensor([0.0]),
                      keys.IS_STOP: torch.tensor([False])}, [])
     assert reward.reward(td).item() == pytest.approx(0.5 * 0.2 + 0.5 * -2.0 * 0.4)
+
+
+@pytest.mark.parametrize("clip", [[1.0, -1.0], [0.0], "big", [True, 2.0]])
+def test_reward_clip_config_is_checked(clip):
+    from mqa_rl.transforms.factory import make_reward_transform
+    with pytest.raises(ValueError, match="reward_clip"):
+        make_reward_transform({"terms": {"local_occlusion": {}}, "question_weights": {"local_occlusion": 1.0},
+                               "reward_clip": clip}, push_length=0.1)
+
+
+def test_reward_clip_clamps_the_total():
+    """R_e = 3 with β = 1 gives 1, R_l = −7 with β = 0 gives −1, a stop's −1 stays."""
+    r = MQAReward({"local_occlusion": 1.0}, clip=[-1, 1])
+    nxt = TensorDict({keys.EXPLORATION: torch.tensor([[3.0], [0.0], [0.0]]),
+                      keys.BETA: torch.tensor([[1.0], [0.0], [0.0]]),
+                      keys.SIMPLE_SCENE: torch.zeros(3, 1), keys.IS_STOP: torch.tensor([[False], [False], [True]]),
+                      (keys.REWARD_TERMS, "local_occlusion"): torch.tensor([[0.0], [-7.0], [0.0]])}, batch_size=[3])
+    assert r.reward(nxt).squeeze(-1).tolist() == [1.0, -1.0, -1.0]

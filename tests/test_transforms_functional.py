@@ -113,3 +113,12 @@ def test_properties(a, b, m):
 def test_beta_range(step, horizon):
     b = beta_schedule(step, horizon).item()
     assert 0.5 <= b <= 1.0
+
+
+def test_beta_schedule_final_value():
+    """β_T = 0 hands the reward to R_q after T; β_T = 1 keeps R_e alone; out of [0, 1] is refused."""
+    assert beta_schedule(1000, 2000, final=0.0).item() == pytest.approx(0.5)
+    assert beta_schedule(5000, 2000, final=0.0).item() == 0.0
+    assert beta_schedule(5000, 2000, final=1.0).item() == 1.0
+    with pytest.raises(ValueError, match="final β"):
+        beta_schedule(0, 2000, final=1.5)

@@ -20,6 +20,7 @@ from tensordict import TensorDictBase
 from torchrl.data import LazyMemmapStorage, LazyTensorStorage, TensorDictPrioritizedReplayBuffer
 
 from mqa_rl import keys
+from mqa_rl.losses.augment import DihedralAugment
 
 OBS_KEYS = (keys.RGB, keys.DEPTH, keys.QUESTION, keys.ACTION_MASK)
 REPLAY_KEYS = (
@@ -42,7 +43,8 @@ def transition_bytes(example: TensorDictBase) -> int:
 
 
 def make_replay_buffer(cfg: Mapping, scratch_dir: str | Path | None) -> TensorDictPrioritizedReplayBuffer:
-    """From the ``buffer`` config: size, batch_size, alpha, beta_init, storage (memmap | memory)."""
+    """From the ``buffer`` config: size, batch_size, alpha, beta_init, storage (memmap | memory),
+    augment (none | dihedral: each sample under a random symmetry of the square bin, ``augment.py``)."""
     size, batch = int(cfg["size"]), int(cfg["batch_size"])
     if size < batch or batch < 1:
         raise ValueError(f"buffer.size={size} must be ≥ buffer.batch_size={batch} ≥ 1")
@@ -54,8 +56,14 @@ def make_replay_buffer(cfg: Mapping, scratch_dir: str | Path | None) -> TensorDi
         storage = LazyTensorStorage(size)
     else:
         raise ValueError(f"buffer.storage={cfg['storage']!r}; choose 'memmap' (disk) or 'memory'")
-    return TensorDictPrioritizedReplayBuffer(alpha=float(cfg.get("alpha", 0.6)), beta=float(cfg.get("beta_init", 0.4)),
-                                             priority_key=keys.TD_ERROR, storage=storage, batch_size=batch)
+    augment = cfg.get("augment", "none")
+    if augment not in ("none", "dihedral"):
+        raise ValueError(f"buffer.augment={augment!r}; choose 'none' or 'dihedral'")
+    rb = TensorDictPrioritizedReplayBuffer(alpha=float(cfg.get("alpha", 0.6)), beta=float(cfg.get("beta_init", 0.4)),
+                                           priority_key=keys.TD_ERROR, storage=storage, batch_size=batch)
+    if augment == "dihedral":
+        rb.append_transform(DihedralAugment())
+    return rb
 
 
 def annealed_is_beta(beta_init: float, progress: float) -> float:

@@ -11,7 +11,9 @@ from mqa_rl.transforms.functional import beta_schedule
 
 
 class BetaSchedule(RewardTerm):
-    """Writes β = 1 − 0.5 · S_n / T (then 0.5) for every step; S_n is the DQN training-step count.
+    """Writes β = 1 − (1 − β_T) · S_n / T (then β_T) for every step; S_n is the DQN training-step count.
+
+    β_T (``final``) is the paper's 0.5 by default: half of every push reward stays R_e for ever.
 
     ``counter`` is the int64 scalar holding S_n. The training loop advances it (``set_train_steps``).
     To reach env copies in collector worker processes, create it once with
@@ -24,9 +26,10 @@ class BetaSchedule(RewardTerm):
 
     out_key = keys.BETA
 
-    def __init__(self, horizon: int, counter: torch.Tensor | None = None):
+    def __init__(self, horizon: int, counter: torch.Tensor | None = None, final: float = 0.5):
         super().__init__()
         horizon = finite_number(self, "horizon T (half the replay memory)", horizon, positive=True)
+        self.final = finite_number(self, "final β", final, low=0.0, high=1.0)
         if counter is None:
             counter = torch.zeros((), dtype=torch.int64)
         if not isinstance(counter, torch.Tensor) or counter.dtype != torch.int64 or counter.numel() != 1:
@@ -39,10 +42,10 @@ class BetaSchedule(RewardTerm):
 
     @property
     def beta(self) -> float:
-        return float(beta_schedule(self.train_steps, self.horizon))
+        return float(beta_schedule(self.train_steps, self.horizon, self.final))
 
     def compute(self, before, after) -> torch.Tensor:
-        beta = beta_schedule(self.train_steps, self.horizon).to(after.device)
+        beta = beta_schedule(self.train_steps, self.horizon, self.final).to(after.device)
         return beta.expand(*after.batch_size, 1)
 
     def _reset(self, tensordict, tensordict_reset):

@@ -6,6 +6,8 @@ Config keys (see ``recipes/conf/reward/*.yaml``)::
     question_weights:  {name: weight}                 R_q = Σ weight · term
     simple_threshold:  0.2                            the simple-scene overlap threshold
     beta_horizon:      2000                           T, half the replay memory
+    beta_final:        0.5                            β after T (paper 0.5; 0: R_q alone)
+    reward_clip:       null                           [lo, hi]: clamp the total (DQN's usual [-1, 1])
     stop_reward / early_stop_penalty / redundant_push_reward
 
 A new term is a ``RewardTerm`` subclass registered with ``register_term(name, cls)``; it can then
@@ -74,7 +76,7 @@ def _make_term(name: str, kwargs) -> RewardTerm:
 def make_reward_transform(cfg: Mapping, *, push_length: float, counter: torch.Tensor | None = None) -> Compose:
     """Terms, simple-scene flag, β and ``MQAReward`` as one ``Compose`` for ``TransformedEnv``."""
     cfg = dict(_plain(cfg))
-    allowed = {"terms", "question_weights", "simple_threshold", "beta_horizon", "stop_reward",
+    allowed = {"terms", "question_weights", "simple_threshold", "beta_horizon", "beta_final", "reward_clip", "stop_reward",
                "early_stop_penalty", "redundant_push_reward", "name", "description"}
     unknown = set(cfg) - allowed
     if unknown:
@@ -94,9 +96,10 @@ def make_reward_transform(cfg: Mapping, *, push_length: float, counter: torch.Te
             kwargs.setdefault("push_length", push_length)
         transforms.append(_make_term(name, kwargs))
     transforms.append(SimpleSceneFlag(cfg.get("simple_threshold", 0.2)))
-    transforms.append(BetaSchedule(cfg.get("beta_horizon", 2000), counter))
+    transforms.append(BetaSchedule(cfg.get("beta_horizon", 2000), counter, final=cfg.get("beta_final", 0.5)))
     transforms.append(MQAReward(
         weights,
+        clip=cfg.get("reward_clip"),
         stop_reward=cfg.get("stop_reward", 1.0),
         early_stop_penalty=cfg.get("early_stop_penalty", -1.0),
         redundant_push_reward=cfg.get("redundant_push_reward", 0.0),

@@ -84,13 +84,16 @@ def local_occlusion_reward(
     return torch.where(any_target, _relative_drop(before.clamp(0, 1), after.clamp(0, 1)), torch.zeros_like(before))
 
 
-def beta_schedule(step: torch.Tensor | int, horizon: torch.Tensor | int) -> torch.Tensor:
-    """β = 1 − 0.5 · S_n / T for S_n ≤ T, else 0.5 (S_n: DQN training steps, T: half the replay size)."""
+def beta_schedule(step: torch.Tensor | int, horizon: torch.Tensor | int, final: float = 0.5) -> torch.Tensor:
+    """β = 1 − (1 − final) · S_n / T for S_n ≤ T, else ``final`` (S_n: DQN training steps, T: half the
+    replay size). The paper's ``final`` is 0.5; 0 hands the reward entirely to R_q after T."""
     step = torch.as_tensor(step, dtype=torch.float32)
     horizon = torch.as_tensor(horizon, dtype=torch.float32)
     if (horizon <= 0).any():
         raise ValueError(f"the β horizon T must be positive, got {horizon}")
-    return 1.0 - 0.5 * (step.clamp(min=0) / horizon).clamp(max=1.0)
+    if not 0.0 <= float(final) <= 1.0:
+        raise ValueError(f"the final β must lie in [0, 1], got {final}")
+    return 1.0 - (1.0 - float(final)) * (step.clamp(min=0) / horizon).clamp(max=1.0)
 
 
 def is_simple_scene(chi: torch.Tensor, target_mask: torch.Tensor, threshold: float = 0.2) -> torch.Tensor:

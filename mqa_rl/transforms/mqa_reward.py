@@ -4,6 +4,7 @@
     stop,  cluttered      → −1            (``early_stop_penalty``)
     push,  simple scene   →  0            (``redundant_push_reward``)
     push,  cluttered      → β · R_e + (1 − β) · R_q,   R_q = Σ_k w_k · term_k
+    then, with ``clip=(lo, hi)``, the total clamped to [lo, hi] (applied on stored transitions too)
 
 "Simple" is judged on the scene before the action (``SimpleSceneFlag``), R_e, β and the R_q terms
 are read from ``"reward_terms"``: put their transforms before this one. The flag must be finite on
@@ -13,7 +14,7 @@ elsewhere they may hold anything. A non-finite value that counts raises ``ValueE
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import torch
 from tensordict import TensorDictBase
@@ -34,6 +35,7 @@ class MQAReward(Transform):
         stop_reward: float = 1.0,
         early_stop_penalty: float = -1.0,
         redundant_push_reward: float = 0.0,
+        clip: tuple[float, float] | None = None,
     ):
         if not isinstance(question_weights, Mapping) or not question_weights:
             raise ValueError(f"MQAReward: question_weights must name at least one term with its weight, e.g. "
@@ -45,6 +47,13 @@ class MQAReward(Transform):
         self.stop_reward = finite_number(self, "stop_reward", stop_reward)
         self.early_stop_penalty = finite_number(self, "early_stop_penalty", early_stop_penalty)
         self.redundant_push_reward = finite_number(self, "redundant_push_reward", redundant_push_reward)
+        self.clip = None
+        if clip is not None:
+            ok = isinstance(clip, Sequence) and not isinstance(clip, str) and len(clip) == 2
+            low, high = (finite_number(self, "reward_clip bounds", v) for v in clip) if ok else (0.0, 0.0)
+            if not ok or low >= high:
+                raise ValueError(f"MQAReward: reward_clip must be null or [low, high] with low < high, got {clip!r}")
+            self.clip = (low, high)
 
     def _used(self, after: TensorDictBase, key, counted: torch.Tensor) -> torch.Tensor:
         """A term, finite where ``counted``; where not, 0 (so a NaN there cannot leak through w · term)."""
@@ -70,7 +79,8 @@ class MQAReward(Transform):
         push = beta * self._used(after, keys.EXPLORATION, used) + (1 - beta) * self.question_reward(after, used)
         stop_r = torch.where(simple, torch.full_like(push, self.stop_reward), torch.full_like(push, self.early_stop_penalty))
         push_r = torch.where(simple, torch.full_like(push, self.redundant_push_reward), push)
-        return torch.where(stop, stop_r, push_r)
+        total = torch.where(stop, stop_r, push_r)
+        return total if self.clip is None else total.clamp(*self.clip)
 
     def _step(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> TensorDictBase:
         next_tensordict.set(keys.REWARD, self.reward(next_tensordict))
