@@ -32,6 +32,8 @@ QUESTION_TYPE = (INFO, "question_type")       # int64 [1] index into mqa_rl.data
 PUSH_UNREACHABLE = (INFO, "push_unreachable")  # bool [1] part of the push was out of the arm's reach (cut short or skipped)
 ARM_COLLISION = (INFO, "arm_collision")        # bool [1] a robot part other than the pushing tool touched something
 TIP_ERROR = (INFO, "tip_error")                # float32 [2] mean, max distance (m) of the tool tip from the push line
+# the simulator's segmentation on the action grid: never a policy input, a training signal (auxiliary loss)
+TARGET_CELLS = (INFO, "target_cells")          # float32 [GRID, GRID] fraction of each grid cell's pixels showing a target
 
 # reward terms written by mqa_rl.transforms (under "next"; zeros after a reset), each float32 [1]
 REWARD_TERMS = "reward_terms"

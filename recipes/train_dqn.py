@@ -41,6 +41,7 @@ from mqa_rl.evaluation.episode_metrics import episode_metrics, summarise
 from mqa_rl.evaluation.rollouts import run_episodes
 from mqa_rl.losses.dqn import make_dqn_loss
 from mqa_rl.losses.replay import annealed_is_beta, compact_transitions, make_replay_buffer
+from mqa_rl.losses.target_map import TargetMapLoss
 from mqa_rl.modules.push_policy import make_explorer, make_push_qnet, make_q_actor
 from mqa_rl.training.checkpoint import TrainingCheckpoint
 from mqa_rl.training.run_logger import RunLogger, trim_scalars
@@ -58,6 +59,9 @@ def check_config(cfg: DictConfig) -> None:
                          f"collector.frames_per_batch={col.frames_per_batch}")
     if loss.updates_per_batch < 0:
         raise ValueError(f"loss.updates_per_batch={loss.updates_per_batch} must be ≥ 0")
+    if cfg.loss.get("target_map_weight", 0) > 0 and not cfg.model.get("target_head", False):
+        raise ValueError(f"loss.target_map_weight={cfg.loss.target_map_weight} needs model.target_head=true "
+                         f"(the auxiliary head it trains)")
     if buf.size < buf.batch_size:
         raise ValueError(f"buffer.size={buf.size} must be ≥ buffer.batch_size={buf.batch_size}")
     if not 0.0 <= col.eps_end <= col.eps_init <= 1.0:
@@ -127,6 +131,8 @@ def train(cfg: DictConfig) -> dict:
 
     # ---- loss, optimiser, replay
     loss, target_updater = make_dqn_loss(actor, cfg.loss)
+    aux_weight = float(cfg.loss.get("target_map_weight", 0.0))
+    aux_loss = TargetMapLoss(net, aux_weight) if aux_weight > 0 else None
     params = [p for p in loss.parameters() if p.requires_grad]
     optim = torch.optim.Adam(params, lr=cfg.optim.lr, weight_decay=cfg.optim.weight_decay)
     scratch = Path(buf.scratch_dir) if buf.scratch_dir else out / "replay_scratch"
@@ -189,12 +195,17 @@ def train(cfg: DictConfig) -> dict:
                 # ---- updates
                 t0 = time.perf_counter()
                 if state["frames"] >= col.learning_starts and len(rb) >= buf.batch_size:
-                    losses, qs = [], []
+                    losses, qs, aux_terms = [], [], []
                     for _ in range(cfg.loss.updates_per_batch):
                         sample = rb.sample().to(device)
                         out_td = loss(sample)
+                        total_loss = out_td["loss"]
+                        if aux_loss is not None:
+                            aux_td = aux_loss(sample)
+                            total_loss = total_loss + aux_td["loss_target_map"]
+                            aux_terms.append((aux_td["loss_target_map"].item(), aux_td["target_map_iou"].item()))
                         optim.zero_grad()
-                        out_td["loss"].backward()
+                        total_loss.backward()
                         torch.nn.utils.clip_grad_norm_(params, cfg.optim.max_grad_norm)
                         optim.step()
                         target_updater.step()
@@ -208,6 +219,8 @@ def train(cfg: DictConfig) -> dict:
                                         "train/mean_q": float(data[keys.CHOSEN_ACTION_VALUE].mean()),
                                         "train/is_beta": rb.sampler.beta,
                                         "time/updates_per_s": len(losses) / max(time.perf_counter() - t0, 1e-9)})
+                    if aux_terms:
+                        metrics["train/target_map_loss"], metrics["train/target_map_iou"] = map(float, np.mean(aux_terms, 0))
                 if acting is not explore:
                     acting.load_state_dict(explore.state_dict())
                 collector.update_policy_weights_()

@@ -32,7 +32,8 @@ def transitions(n: int, seed: int = 0) -> TensorDict:
                 keys.DEPTH: 0.8 + 0.1 * torch.rand(n, 1, S, S, generator=g),
                 keys.QUESTION: torch.randint(1, VOCAB, (n, L), generator=g),
                 keys.ACTION_MASK: mask.expand(n, -1).clone(),
-                keys.INFO: {"overlap": torch.rand(n, 50, generator=g)}}
+                keys.INFO: {"overlap": torch.rand(n, 50, generator=g),
+                            "target_cells": (torch.rand(n, actions.GRID, actions.GRID, generator=g) > 0.9).float()}}
 
     nxt = obs()
     nxt.update({keys.REWARD: torch.randn(n, 1, generator=g), "done": torch.zeros(n, 1, dtype=torch.bool),
@@ -90,7 +91,7 @@ def test_replay_keeps_only_what_the_loss_reads_compactly(tmp_path):
     assert stored[keys.RGB].dtype == torch.uint8 and stored["next", keys.DEPTH].dtype == torch.float16
     assert (stored[keys.DEPTH].float() - data[keys.DEPTH]).abs().max() < 1e-3     # float16: < 1 mm at 0.9 m
     per = transition_bytes(stored[0])
-    assert 2 * 3 * S * S < per < 2 * (3 * S * S + 2 * S * S + actions.NUM_ACTIONS) + 1024   # uint8 rgb, 2-byte depth
+    assert 2 * 3 * S * S < per < 2 * (3 * S * S + 2 * S * S + actions.NUM_ACTIONS) + 2 * actions.GRID ** 2 + 1024   # uint8 rgb, 2-byte depth and target cells
     # the loss runs on what the replay stores
     _, loss, _, _ = learner()
     loss(stored)
@@ -110,3 +111,29 @@ def test_is_beta_anneals_to_one_and_bad_loss_configs_fail():
         make_dqn_loss(actor, {"gamma": 1.5})
     with pytest.raises(ValueError, match="target_update.kind"):
         make_dqn_loss(actor, {"target_update": {"kind": "sometimes"}})
+
+
+def test_target_map_loss_learns_where_the_targets_are_and_refuses_a_net_without_head():
+    """The auxiliary loss trains the shared state + head on the stored visible-target cells; its
+    gradient reaches the trunks (shared with the DQN loss), and it lowers on a fixed batch."""
+    from mqa_rl.losses.target_map import TargetMapLoss
+
+    torch.manual_seed(0)
+    net = make_push_qnet({**SMALL_NET, "target_head": True}, vocab_size=VOCAB, camera_distance=0.9)
+    aux = TargetMapLoss(net, weight=1.0)
+    batch = compact_transitions(transitions(8))
+    assert batch[keys.TARGET_CELLS].dtype == torch.float16
+    opt = torch.optim.Adam(net.parameters(), lr=3e-3)
+    first = aux(batch)
+    first["loss_target_map"].backward()
+    assert net.rgb_trunk.body[0].weight.grad.abs().sum() > 0          # reaches the visual trunk
+    opt.step()
+    for _ in range(30):
+        opt.zero_grad()
+        aux(batch)["loss_target_map"].backward()
+        opt.step()
+    assert aux(batch)["loss_target_map"] < 0.5 * first["loss_target_map"]
+    with pytest.raises(ValueError, match="target_head=True"):
+        TargetMapLoss(make_push_qnet(SMALL_NET, vocab_size=VOCAB, camera_distance=0.9))
+    with pytest.raises(KeyError, match="target_cells"):
+        aux(batch.exclude(keys.TARGET_CELLS))

@@ -136,6 +136,7 @@ class SapienBinEnv(EnvBase):
             push_unreachable=Categorical(2, shape=(1,), dtype=torch.bool),
             arm_collision=Categorical(2, shape=(1,), dtype=torch.bool),
             tip_error=Unbounded(shape=(2,), dtype=f32),
+            target_cells=Bounded(0.0, 1.0, shape=(actions.GRID, actions.GRID), dtype=f32),
         )
         self.observation_spec = Composite(
             rgb=Bounded(0, 255, shape=(3, h, w), dtype=torch.uint8),
@@ -297,6 +298,7 @@ class SapienBinEnv(EnvBase):
             "answer": torch.tensor([self._answer_index[self.question.answer]]),
             "push_count": torch.tensor([self._push_count]),
             "question_type": torch.tensor([QUESTION_TYPES.index(self.question.type)]),
+            "target_cells": torch.from_numpy(self._target_cells(m["seg"])),
         }
         info.update({k[1]: v for k, v in _execution_info(push).items()})
         return TensorDict(
@@ -309,6 +311,18 @@ class SapienBinEnv(EnvBase):
             },
             batch_size=[],
         )
+
+    def _target_cells(self, seg: np.ndarray) -> np.ndarray:
+        """Fraction of each action-grid cell's pixels where a target is visible (from the segmentation)."""
+        ids = self.world.entity_ids()[self._target]
+        hit = np.isin(seg, ids).astype(np.float32)
+        h, w = hit.shape
+        rows = (np.arange(h) * actions.GRID) // h            # pixel -> grid row / column (any image size)
+        cols = (np.arange(w) * actions.GRID) // w
+        cells = np.zeros((actions.GRID, actions.GRID), np.float32)
+        np.add.at(cells, (rows[:, None], cols[None, :]), hit)
+        counts = np.bincount(rows, minlength=actions.GRID)[:, None] * np.bincount(cols, minlength=actions.GRID)[None, :]
+        return (cells / counts).astype(np.float32)
 
     def _set_seed(self, seed: int | None) -> None:
         self._rng = np.random.default_rng(seed)

@@ -58,7 +58,8 @@ def transform_images(x: torch.Tensor, k: int, mirror: bool) -> torch.Tensor:
 class DihedralAugment(Transform):
     """Replay-buffer transform: every sampled transition under a random symmetry of the square.
 
-    Both observations (``root`` and ``"next"``), their action masks and the action are turned alike;
+    Both observations (``root`` and ``"next"``), their action masks, the action and the visible-target
+    cells (if stored) are turned alike;
     reward, done flags, question and the sample's buffer ``index`` (for priority updates) stay.
     """
 
@@ -81,6 +82,8 @@ class DihedralAugment(Transform):
                 mask = (*prefix, keys.ACTION_MASK)
                 flat.get(mask)[idx] = transform_push_map(flat.get(mask)[idx], k, mirror)
             flat.get(keys.ACTION)[idx] = transform_action(flat.get(keys.ACTION)[idx], k, mirror)
+            if keys.TARGET_CELLS in flat.keys(True):                 # a grid map: turns like the images
+                flat.get(keys.TARGET_CELLS)[idx] = transform_images(flat.get(keys.TARGET_CELLS)[idx], k, mirror)
         return flat.reshape(tensordict.shape)
 
     def _call(self, next_tensordict: TensorDictBase) -> TensorDictBase:   # not an env transform

@@ -1,7 +1,8 @@
 """Prioritized replay (the paper's anchor VPG) over a memory-mapped storage, sized for 24 GiB machines.
 
 A transition keeps only what ``DQNLoss`` reads: rgb (uint8), depth (float16: 0.5 mm steps at 0.9 m),
-question, action mask, action, and under ``"next"`` the same observations plus reward and done flags.
+question, action mask, action, the visible-target cells (float16, for the auxiliary loss of
+``target_map.py``), and under ``"next"`` the same observations plus reward and done flags.
 ``info`` and the reward terms stay out (the logs read them from the collected batch). See
 ``transition_bytes`` for the size; the storage is a memmap on disk, so RAM holds only the pages in use.
 
@@ -24,7 +25,7 @@ from mqa_rl.losses.augment import DihedralAugment
 
 OBS_KEYS = (keys.RGB, keys.DEPTH, keys.QUESTION, keys.ACTION_MASK)
 REPLAY_KEYS = (
-    *OBS_KEYS, keys.ACTION,
+    *OBS_KEYS, keys.ACTION, keys.TARGET_CELLS,
     *(("next", k) for k in (*OBS_KEYS, keys.REWARD, "done", "terminated", "truncated")),
 )
 
@@ -32,8 +33,8 @@ REPLAY_KEYS = (
 def compact_transitions(data: TensorDictBase) -> TensorDictBase:
     """Collected transitions [N] → what the replay stores: selected keys, depth as float16."""
     out = data.select(*REPLAY_KEYS, strict=True)
-    for depth in (keys.DEPTH, ("next", keys.DEPTH)):
-        out.set(depth, out.get(depth).to(torch.float16))
+    for key in (keys.DEPTH, ("next", keys.DEPTH), keys.TARGET_CELLS):
+        out.set(key, out.get(key).to(torch.float16))
     return out
 
 

@@ -17,7 +17,7 @@ from mqa_rl import keys
 from mqa_rl.modules.push_qnet import PushQNet
 
 QNET_OPTIONS = {"trunk", "weights", "light_channels", "light_downsample", "fuse_channels", "question_dim", "head_channels",
-                "head_context", "coords", "depth_scale", "freeze_trunk"}
+                "head_context", "coords", "depth_scale", "freeze_trunk", "target_head", "film"}
 
 
 def make_push_qnet(cfg: Mapping, *, vocab_size: int, camera_distance: float) -> PushQNet:

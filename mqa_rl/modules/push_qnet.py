@@ -22,7 +22,10 @@ the ImageNet mean/std, to suit pretrained weights.
 Options beyond the paper (``paper`` profile: all off): ``head_context`` 3×3 convs (at the width of
 the first head layer, after a 1×1 reduction) before the final 1×1 layers (a push acts 7 cells away;
 1×1 heads only see their own cell), ``coords`` two channels of grid coordinates (where the walls
-are), ``light_downsample`` (the light trunk on a 2×2-averaged image).
+are), ``light_downsample`` (the light trunk on a 2×2-averaged image), ``film`` the question
+scaling and shifting the visual channels (FiLM) before the concatenation, ``target_head`` a 1×1 conv from
+the state (and a hidden layer) to one map that learns where the question's targets are visible (an auxiliary task trained
+on the simulator's segmentation, ``mqa_rl.losses.target_map``; the Q values never read it).
 """
 
 from __future__ import annotations
@@ -81,6 +84,8 @@ class PushQNet(nn.Module):
         coords: bool = False,
         depth_scale: float = 0.1,
         freeze_trunk: bool = False,
+        target_head: bool = False,
+        film: bool = False,
     ):
         super().__init__()
         self.trunk_name = trunk
@@ -106,6 +111,11 @@ class PushQNet(nn.Module):
             self.head = nn.Sequential(*context, _conv_stack([*head_channels, actions.DIRECTIONS + 1], last_relu=False))
         else:                 # the paper: 1×1 convs only
             self.head = nn.Sequential(_conv_stack([state, *head_channels, actions.DIRECTIONS + 1], last_relu=False))
+        # FiLM (Perez et al. 2018): the question scales and shifts every visual channel, so "features of
+        # the asked-about class" is one multiplication away; concatenation alone is additive at 1x1.
+        self.film = nn.Linear(question_dim, 2 * fuse_channels[-1]) if film else None
+        self.target_head = nn.Sequential(nn.Conv2d(state, head_channels[0], 1), nn.ReLU(inplace=True),
+                                         nn.Conv2d(head_channels[0], 1, 1)) if target_head else None
         self.register_buffer("rgb_mean", torch.tensor(IMAGENET_MEAN).view(1, 3, 1, 1) if self.imagenet_input
                              else torch.full((1, 3, 1, 1), 0.5))
         self.register_buffer("rgb_std", torch.tensor(IMAGENET_STD).view(1, 3, 1, 1) if self.imagenet_input
@@ -136,19 +146,33 @@ class PushQNet(nn.Module):
         return feat
 
     # ------------------------------------------------------------------------------------ forward
-    def q_map(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor) -> torch.Tensor:
-        """[B, 9, 28, 28]: 8 push direction maps and the stop map (batch dims flattened)."""
+    def state(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor) -> torch.Tensor:
+        """[B, C, 28, 28]: visual features, the tiled question feature (and coordinates)."""
         x, h = self.normalise(rgb, depth)
         fr = self._grid(self.rgb_trunk(self._align(x)))
         fd = self._grid(self.depth_trunk(self._align(h)))
         visual = self.fuse(torch.cat([fr, fd], 1))
-        q = self.question(question)[:, :, None, None].expand(-1, -1, actions.GRID, actions.GRID)
+        qf = self.question(question)
+        if self.film is not None:
+            gamma, beta = self.film(qf)[:, :, None, None].chunk(2, dim=1)
+            visual = torch.relu(visual * (1 + gamma) + beta)
+        q = qf[:, :, None, None].expand(-1, -1, actions.GRID, actions.GRID)
         parts = [visual, q]
         if self.coords:
             lin = torch.linspace(-1, 1, actions.GRID, device=visual.device)
             yy, xx = torch.meshgrid(lin, lin, indexing="ij")
             parts.append(torch.stack([xx, yy]).expand(visual.shape[0], -1, -1, -1))
-        return self.head(torch.cat(parts, 1))
+        return torch.cat(parts, 1)
+
+    def q_map(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor) -> torch.Tensor:
+        """[B, 9, 28, 28]: 8 push direction maps and the stop map (batch dims flattened)."""
+        return self.head(self.state(rgb, depth, question))
+
+    def target_logits(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor) -> torch.Tensor:
+        """[B, 28, 28] logits of "a target of this question is visible in the cell" (``target_head``)."""
+        if self.target_head is None:
+            raise RuntimeError("this PushQNet has no target head: build it with target_head=True")
+        return self.target_head(self.state(rgb, depth, question)).squeeze(1)
 
     def forward(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor) -> torch.Tensor:
         batch = rgb.shape[:-3]
