@@ -10,6 +10,7 @@ import threading
 import time
 from pathlib import Path
 
+import cv2
 import httpx
 import numpy as np
 import pytest
@@ -74,6 +75,8 @@ def test_random_episode_streams_frames_then_answer_and_video(served):
     assert first[0] is not None and "step 0" in first[5] and "running" in first[3]
     assert f"True answer: {q.answer}" in answer and "no VQA checkpoint" in answer
     assert video.endswith(".webm") and Path(video).stat().st_size > 0
+    capture = cv2.VideoCapture(video)                                     # VP8 WebM, one frame per state
+    assert int(capture.get(cv2.CAP_PROP_FRAME_COUNT)) == len(outputs) and capture.read()[0]
     headers, rows = table["headers"], table["data"]
     assert {"step", "action", "visible fraction (mean)", "R_e", "R_g", "R_l", "β", "reward"} <= set(headers)
     assert len(rows) == len(outputs) and rows[0][headers.index("action")] == "first image"

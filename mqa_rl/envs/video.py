@@ -64,7 +64,7 @@ def write_video(frames: list[np.ndarray], path, fps: float = 1.5) -> Path:
         raise ValueError("no frames to write")
     suffix = path.suffix.lower()
     if suffix not in (".mp4", ".webm", ".gif"):
-        raise ValueError(f"unsupported video format {suffix!r}; use .mp4, .webm or .gif")
+        raise ValueError(f"unsupported video format {suffix!r}; use .mp4 or .gif, or .webm (VP8) for browsers")
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}{suffix}")
     bgr = [cv2.cvtColor(f, cv2.COLOR_RGB2BGR) for f in frames]
