@@ -96,7 +96,7 @@ def measure(url: str, backend, users: int, episodes: int, level: str, seed: int)
 def screenshot(url: str, backend, path: Path, level: str) -> None:
     from mqa_rl.demo.page_driver import DemoPage, chromium
 
-    driver = chromium(1400, 2300)
+    driver = chromium(1400, 2500)
     try:
         page = DemoPage(driver, url)
         page.open()

@@ -133,8 +133,9 @@ def build_app(backend: DemoBackend) -> gr.Blocks:
                 answer = gr.Label(label="VQA answer probabilities", elem_id="answer-probs")
                 video = gr.Video(label="episode video (download: the button on the player)", interactive=False,
                                  elem_id="episode-video")
-        table = gr.Dataframe(_rows_frame([], backend.table_columns), interactive=False, wrap=True,
-                             label="per step: the question's targets (visible fraction = A_s / A_t) and reward terms",
+        table = gr.Dataframe(_rows_frame([], backend.table_columns), interactive=False,
+                             label="per step: the question's targets (how many, how many seen at all, their visible "
+                                   "fraction A_s / A_t) and the step's reward terms",
                              elem_id="step-table")
         visible = gr.State([c.id for c in cards])
 

@@ -55,8 +55,7 @@ class EpisodeUpdate:
     answer_text: str = ""                      # true answer next to the VQA's (or why there is none)
     video: Path | None = None
     done: bool = False
-    step: int = 0
-    elapsed: float = 0.0                       # seconds since the run was asked for
+    step: int = 0                              # env steps done (0: the first image)
 
 
 class DemoBackend:
@@ -125,7 +124,6 @@ class DemoBackend:
                 for view in play(env, actor, question.id, question.text):
                     rows.append(view.row)
                     update = EpisodeUpdate(frame=view.frame, rows=list(rows), step=view.step,
-                                           elapsed=time.perf_counter() - t0,
                                            message=f"{question.id}: step {view.step} of at most {self.cfg.max_pushes}")
                     if view.done:
                         last = view
@@ -142,7 +140,6 @@ class DemoBackend:
         update.video = self._video(last, question, session)
         update.done = True
         update.message = f"{question.id}: done after {len(rows) - 1} step(s) in {time.perf_counter() - t0:.1f} s"
-        update.elapsed = time.perf_counter() - t0
         yield update
 
     def _answer(self, question, vqa: str | None, last) -> tuple[dict[str, float] | None, str]:

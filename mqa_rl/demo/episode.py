@@ -71,8 +71,8 @@ def table_row(step: int, td, action: int | None) -> dict:
     row = {"step": step, "action": "first image" if action is None else describe_action(action),
            "targets": int(target.sum()),
            "targets seen": int((td[keys.VISIBLE_AREA][target] > 0).sum()),
-           "visible fraction (mean)": round(float(visible.mean()), 3) if len(visible) else None,
-           "visible fraction (min)": round(float(visible.min()), 3) if len(visible) else None}
+           "visible (mean)": round(float(visible.mean()), 3) if len(visible) else None,
+           "visible (min)": round(float(visible.min()), 3) if len(visible) else None}
     terms = td.get(keys.REWARD_TERMS, None)
     if terms is not None:
         for name in terms.keys():
@@ -97,32 +97,37 @@ def step_frame(before, after, camera, question: str, step: int) -> np.ndarray:
     return _side_by_side(panels)
 
 
+@torch.no_grad()
+def _act_and_step(env, policy, td):
+    # grad mode and the exploration type are set per step, never across a yield: Gradio resumes the
+    # generator in any of its worker threads, and grad mode is per thread
+    with set_exploration_type(ExplorationType.DETERMINISTIC):
+        return env.step(policy(td))
+
+
 def play(env, policy, question_id: str, question_text: str) -> Iterator[StepView]:
     """Yield a ``StepView`` after the reset and after every step, until the episode ends."""
     camera = env.base_env.camera if hasattr(env, "base_env") else env.camera
-    with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
+    with torch.no_grad():
         td = env.reset(question_id=question_id)
-        first = td[keys.RGB].clone()
-        tokens = td[keys.QUESTION].clone()
-        yield StepView(0, annotate(_hwc(first), SCALE, [question_text, "step 0: first image"]), table_row(0, td, None))
-        steps = []
-        while True:
-            td = policy(td)
-            td = env.step(td)
-            step = len(steps)
-            steps.append(td.select(*RECORDED, strict=False).clone())
-            nxt = td["next"]
-            view = StepView(step + 1, step_frame(td, nxt, camera, question_text, step),
-                            table_row(step + 1, nxt, int(td[keys.ACTION])))
-            if bool(nxt["done"].item()):
-                rollout = torch.stack(steps, 0)
-                view.done, view.rollout = True, rollout
-                view.first_rgb, view.last_rgb = _t(first), _t(nxt[keys.RGB])
-                view.tokens = tokens
-                yield view
-                return
+    first = td[keys.RGB].clone()
+    tokens = td[keys.QUESTION].clone()
+    yield StepView(0, annotate(_hwc(first), SCALE, [question_text, "step 0: first image"]), table_row(0, td, None))
+    steps = []
+    while True:
+        td = _act_and_step(env, policy, td)
+        step = len(steps)
+        steps.append(td.select(*RECORDED, strict=False).clone())
+        nxt = td["next"]
+        view = StepView(step + 1, step_frame(td, nxt, camera, question_text, step),
+                        table_row(step + 1, nxt, int(td[keys.ACTION])))
+        if bool(nxt["done"].item()):
+            view.done, view.rollout = True, torch.stack(steps, 0)
+            view.first_rgb, view.last_rgb, view.tokens = _t(first), _t(nxt[keys.RGB]), tokens
             yield view
-            td = step_mdp(td)
+            return
+        yield view
+        td = step_mdp(td)
 
 
 def _t(rgb: torch.Tensor) -> torch.Tensor:
