@@ -1,7 +1,8 @@
 """Episode videos for people to look at: the top camera frames, each push drawn as an arrow.
 
 ``episode_frames`` turns a rollout (a tensordict of shape [T] from ``env.rollout``) into annotated
-frames; ``write_video`` writes mp4 (``.mp4``) or animated gif (``.gif``) with OpenCV, atomically.
+frames; ``write_video`` writes mp4 (``.mp4``), WebM (``.webm``, VP8: what browsers play, OpenCV's
+mp4 codec is not) or animated gif (``.gif``) with OpenCV, atomically.
 """
 
 from __future__ import annotations
@@ -18,7 +19,8 @@ from mqa_rl.sim.geometry import CameraSpec
 ARROW = (255, 40, 40)      # RGB
 
 
-def _annotate(rgb: np.ndarray, scale: int, lines: list[str]) -> np.ndarray:
+def annotate(rgb: np.ndarray, scale: int, lines: list[str]) -> np.ndarray:
+    """The image upscaled ``scale`` times under a white banner with one text line per entry of ``lines``."""
     img = cv2.resize(rgb, None, fx=scale, fy=scale, interpolation=cv2.INTER_NEAREST)
     banner = np.full((18 * len(lines) + 6, img.shape[1], 3), 255, np.uint8)
     for i, text in enumerate(lines):
@@ -45,13 +47,13 @@ def episode_frames(rollout, camera: CameraSpec, question: str = "", scale: int =
     for t in range(rollout.shape[0]):
         stop = bool(nxt[keys.IS_STOP][t].item())
         label = "stop" if stop else f"push {t + 1}"
-        img = _annotate(rgb[t], scale, [question, f"step {t}: {label}"])
+        img = annotate(rgb[t], scale, [question, f"step {t}: {label}"])
         if not stop:
             body = img[img.shape[0] - rgb.shape[1] * scale:]
             body[:] = draw_push(body, nxt[keys.PUSH_START][t].numpy(), nxt[keys.PUSH_END][t].numpy(), camera, scale)
         frames.append(img)
     last = nxt[keys.RGB][-1].numpy().transpose(1, 2, 0)
-    frames.append(_annotate(np.ascontiguousarray(last), scale, [question, f"step {rollout.shape[0]}: final"]))
+    frames.append(annotate(np.ascontiguousarray(last), scale, [question, f"step {rollout.shape[0]}: final"]))
     return frames
 
 
@@ -61,17 +63,18 @@ def write_video(frames: list[np.ndarray], path, fps: float = 1.5) -> Path:
     if not frames:
         raise ValueError("no frames to write")
     suffix = path.suffix.lower()
-    if suffix not in (".mp4", ".gif"):
-        raise ValueError(f"unsupported video format {suffix!r}; use .mp4 or .gif")
+    if suffix not in (".mp4", ".webm", ".gif"):
+        raise ValueError(f"unsupported video format {suffix!r}; use .mp4 or .gif, or .webm (VP8) for browsers")
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}{suffix}")
     bgr = [cv2.cvtColor(f, cv2.COLOR_RGB2BGR) for f in frames]
     try:
-        if suffix == ".mp4":
+        if suffix in (".mp4", ".webm"):
             h, w = bgr[0].shape[:2]
-            writer = cv2.VideoWriter(str(tmp), cv2.VideoWriter_fourcc(*"mp4v"), fps, (w, h))
+            fourcc = "mp4v" if suffix == ".mp4" else "VP80"
+            writer = cv2.VideoWriter(str(tmp), cv2.VideoWriter_fourcc(*fourcc), fps, (w, h))
             if not writer.isOpened():
-                raise RuntimeError("OpenCV cannot write mp4 here; write a .gif instead")
+                raise RuntimeError(f"OpenCV cannot write {suffix} here; write a .gif instead")
             for f in bgr:
                 writer.write(f)
             writer.release()

@@ -31,9 +31,10 @@ class CheckpointCorrupt(RuntimeError):
     """A checkpoint exists but cannot be restored (truncated, edited, or from another config)."""
 
 
-def _digests(components_dir: Path, skip: Path) -> dict[str, str]:
+def _digests(components_dir: Path, skip: Path, component: str | None = None) -> dict[str, str]:
     out = {}
-    for f in sorted(components_dir.rglob("*")):
+    roots = [components_dir] if component is None else sorted(components_dir.glob(f"*-{component}"))
+    for f in sorted(f for root in roots for f in root.rglob("*")):
         if f.is_file() and skip not in f.parents:
             h = hashlib.sha256()
             with f.open("rb") as fh:
@@ -57,13 +58,18 @@ class IntegrityAdapter(CheckpointAdapter):
         return None                       # verified before loading (TrainingCheckpoint.verify)
 
     @staticmethod
-    def verify(checkpoint_dir: Path) -> None:
-        """Raise ``ValueError`` naming the files that are missing or differ from their digests."""
+    def verify(checkpoint_dir: Path, component: str | None = None) -> None:
+        """Raise ``ValueError`` naming the files that are missing or differ from their digests; with
+        ``component`` (e.g. ``"policy"``) only that component's files (not the whole replay buffer)."""
         found = list((checkpoint_dir / "components").glob(f"*{INTEGRITY}/sha256.json"))
         if not found:
             raise ValueError("no integrity record (sha256.json): not a complete mqa_rl training checkpoint")
         expected = json.loads(found[0].read_text())
-        actual = _digests(checkpoint_dir / "components", found[0].parent)
+        actual = _digests(checkpoint_dir / "components", found[0].parent, component)
+        if component is not None:
+            expected = {k: v for k, v in expected.items() if k.split("/", 1)[0].endswith(f"-{component}")}
+            if not expected:
+                raise ValueError(f"the integrity record lists no file of the {component!r} component")
         bad = sorted(k for k in expected if actual.get(k) != expected[k]) + sorted(set(actual) - set(expected))
         if bad:
             raise ValueError(f"{len(bad)} file(s) missing or changed since saved, e.g. {bad[:3]}")

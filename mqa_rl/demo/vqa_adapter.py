@@ -1,0 +1,91 @@
+"""The one place the demo touches the VQA model (issue 10), through its published contract::
+
+    from mqa_rl.modules.vqa import load_vqa
+    model = load_vqa(path)              # FileNotFoundError / ValueError with a clear message
+    probs = model.answer_probs(question_tokens,  # LongTensor [B, L]
+                               first_rgb,        # uint8 [B, H, W, 3]
+                               last_rgb)         # uint8 [B, H, W, 3]  -> FloatTensor [B, n_answers]
+    model.answers                        # list[str], the answer vocabulary
+
+The module is imported lazily: without it, or without a usable checkpoint, the demo still runs and
+says ``no VQA checkpoint: <why>`` where the answer would be. Models are loaded once per server.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import torch
+
+log = logging.getLogger(__name__)
+NO_VQA = "no VQA checkpoint"
+TRAIN_HINT = "train one with issue 10's VQA recipe and start the demo with `vqa=[path/to/checkpoint]`"
+
+
+def _load_vqa():
+    from mqa_rl.modules.vqa import load_vqa      # issue 10; absent in versions before it
+
+    return load_vqa
+
+
+def answer_probs(model, tokens: torch.Tensor, first_rgb: torch.Tensor, last_rgb: torch.Tensor) -> dict[str, float]:
+    """``{answer: probability}`` for one episode: tokens [L], images uint8 [H, W, 3]."""
+    with torch.no_grad():
+        probs = model.answer_probs(tokens.long()[None], first_rgb[None], last_rgb[None])
+    answers = list(model.answers)
+    if probs.shape != (1, len(answers)):
+        raise ValueError(f"the VQA returned probabilities of shape {tuple(probs.shape)} for {len(answers)} answers")
+    return {a: float(p) for a, p in zip(answers, probs[0].tolist())}
+
+
+class VQARegistry:
+    """VQA checkpoints by display name (loaded at start), and those that cannot be used, with why."""
+
+    def __init__(self, paths=()):
+        self.models: dict[str, object] = {}
+        self.problems: list[tuple[str, str]] = []
+        paths = [Path(p) for p in paths or ()]
+        if not paths:
+            return
+        try:
+            load_vqa = _load_vqa()
+        except ImportError as error:
+            for p in paths:
+                self.problems.append((str(p), f"the VQA module mqa_rl.modules.vqa is not in this version ({error})"))
+            return
+        for p in paths:
+            try:
+                self.models[p.name if p.name not in self.models else str(p)] = load_vqa(p)
+            except Exception as error:                        # noqa: BLE001 - listed, never fatal
+                log.warning("VQA checkpoint %s unusable: %s", p, error)
+                self.problems.append((str(p), f"{type(error).__name__}: {str(error)[:400]}"))
+
+    @property
+    def names(self) -> list[str]:
+        return list(self.models)
+
+    def missing_reason(self) -> str:
+        """Why no answer can be given, as the demo shows it where the answer would be."""
+        if self.problems:
+            return f"{NO_VQA}: " + "; ".join(f"{p} unusable ({why})" for p, why in self.problems)
+        return f"{NO_VQA}: none configured; {TRAIN_HINT}"
+
+    def answer(self, name: str | None, tokens, first_rgb, last_rgb) -> dict[str, float] | str:
+        """``{answer: probability}``, or the message saying why there is no answer."""
+        if not name or name not in self.models:
+            return self.missing_reason() if not self.models else f"{NO_VQA}: none chosen (pick one of {self.names})"
+        try:
+            return answer_probs(self.models[name], tokens, first_rgb, last_rgb)
+        except Exception as error:                            # noqa: BLE001 - a broken model must not end the page
+            log.exception("VQA %s failed", name)
+            return f"the VQA {name} failed on this episode: {type(error).__name__}: {error}"
+
+    def status(self) -> str:
+        if self.models:
+            lines = [f"VQA checkpoints: {', '.join(self.names)}."]
+        else:
+            lines = [f"**{self.missing_reason()}**"]
+        if self.models:
+            lines += [f"- unusable `{p}`: {why}" for p, why in self.problems]
+        return "\n".join(lines)
