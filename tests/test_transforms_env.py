@@ -175,3 +175,25 @@ def test_beta_counter_reaches_collector_workers(small_dataset_dir):
     finally:
         coll.shutdown()
     assert betas == [[1.0], [0.5], [0.0]]      # beta_final 0 (the reward configs)
+
+
+def test_scene_occlusion_can_take_the_place_of_exploration(base):
+    """explore_term=scene_occlusion: β weighs R_s (R_g over every object) instead of R_e; R_s is the
+    formula on all real objects, and an unknown explore term is refused."""
+    from mqa_rl.transforms.functional import global_occlusion_reward
+
+    cfg = {**reward_cfg("global"), "explore_term": "scene_occlusion", "reward_clip": None}
+    env = TransformedEnv(base, make_reward_transform(cfg, push_length=base.push_length))
+    td = env.reset()
+    allowed = td[keys.ACTION_MASK][: actions.NUM_PUSHES].nonzero().squeeze(-1)
+    for a in allowed[:: max(1, len(allowed) // 4)][:4]:
+        out = env.step(td.clone().set(keys.ACTION, a))["next"]
+        expect = global_occlusion_reward(td[keys.OVERLAP], out[keys.OVERLAP], td[keys.OBJECT_MASK])
+        assert out[keys.SCENE_OCCLUSION].item() == pytest.approx(expect.item())
+        if out[keys.SIMPLE_SCENE].item() == 0:
+            beta = out[keys.BETA]
+            assert out[keys.REWARD].item() == pytest.approx(
+                (beta * out[keys.SCENE_OCCLUSION] + (1 - beta) * out[keys.GLOBAL_OCCLUSION]).item())
+        td = out
+    with pytest.raises(ValueError, match="explore_term"):
+        make_reward_transform({**cfg, "explore_term": "curiosity"}, push_length=0.1)

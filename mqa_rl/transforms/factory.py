@@ -8,6 +8,7 @@ Config keys (see ``recipes/conf/reward/*.yaml``)::
     beta_horizon:      2000                           T, half the replay memory
     beta_final:        0.5                            β after T (paper 0.5; 0: R_q alone)
     reward_clip:       null                           [lo, hi]: clamp the total (DQN's usual [-1, 1])
+    explore_term:      exploration                    the term β weighs (paper: R_e; or scene_occlusion)
     stop_reward / early_stop_penalty / redundant_push_reward
 
 A new term is a ``RewardTerm`` subclass registered with ``register_term(name, cls)``; it can then
@@ -26,13 +27,14 @@ from mqa_rl.transforms.base import RewardTerm
 from mqa_rl.transforms.beta import BetaSchedule
 from mqa_rl.transforms.exploration import ExplorationReward
 from mqa_rl.transforms.mqa_reward import MQAReward
-from mqa_rl.transforms.occlusion import GlobalOcclusionReward, LocalOcclusionReward
+from mqa_rl.transforms.occlusion import GlobalOcclusionReward, LocalOcclusionReward, SceneOcclusionReward
 from mqa_rl.transforms.simple_scene import SimpleSceneFlag
 
 TERM_REGISTRY: dict[str, type[RewardTerm]] = {
     "exploration": ExplorationReward,
     "global_occlusion": GlobalOcclusionReward,
     "local_occlusion": LocalOcclusionReward,
+    "scene_occlusion": SceneOcclusionReward,
 }
 
 
@@ -76,13 +78,17 @@ def _make_term(name: str, kwargs) -> RewardTerm:
 def make_reward_transform(cfg: Mapping, *, push_length: float, counter: torch.Tensor | None = None) -> Compose:
     """Terms, simple-scene flag, β and ``MQAReward`` as one ``Compose`` for ``TransformedEnv``."""
     cfg = dict(_plain(cfg))
-    allowed = {"terms", "question_weights", "simple_threshold", "beta_horizon", "beta_final", "reward_clip", "stop_reward",
+    allowed = {"terms", "question_weights", "simple_threshold", "beta_horizon", "beta_final", "reward_clip", "explore_term", "stop_reward",
                "early_stop_penalty", "redundant_push_reward", "name", "description"}
     unknown = set(cfg) - allowed
     if unknown:
         raise ValueError(f"unknown reward config keys {sorted(unknown)}; allowed: {sorted(allowed)}")
     terms = _mapping(cfg.get("terms"), "terms")
     terms.setdefault("exploration", {})
+    explore = cfg.get("explore_term", "exploration")
+    if explore not in TERM_REGISTRY:
+        raise ValueError(f"explore_term {explore!r} is not a registered term; registered: {sorted(TERM_REGISTRY)}")
+    terms.setdefault(explore, {})
     weights = _mapping(cfg.get("question_weights"), "question_weights")
     missing = set(weights) - set(terms)
     if missing:
@@ -100,6 +106,7 @@ def make_reward_transform(cfg: Mapping, *, push_length: float, counter: torch.Te
     transforms.append(MQAReward(
         weights,
         clip=cfg.get("reward_clip"),
+        explore_key=TERM_REGISTRY[explore].out_key,
         stop_reward=cfg.get("stop_reward", 1.0),
         early_stop_penalty=cfg.get("early_stop_penalty", -1.0),
         redundant_push_reward=cfg.get("redundant_push_reward", 0.0),

@@ -4,6 +4,7 @@
     stop,  cluttered      → −1            (``early_stop_penalty``)
     push,  simple scene   →  0            (``redundant_push_reward``)
     push,  cluttered      → β · R_e + (1 − β) · R_q,   R_q = Σ_k w_k · term_k
+                                (``explore_key``: another term in R_e's place, e.g. R_s)
     then, with ``clip=(lo, hi)``, the total clamped to [lo, hi] (applied on stored transitions too)
 
 "Simple" is judged on the scene before the action (``SimpleSceneFlag``), R_e, β and the R_q terms
@@ -36,13 +37,15 @@ class MQAReward(Transform):
         early_stop_penalty: float = -1.0,
         redundant_push_reward: float = 0.0,
         clip: tuple[float, float] | None = None,
+        explore_key=keys.EXPLORATION,
     ):
         if not isinstance(question_weights, Mapping) or not question_weights:
             raise ValueError(f"MQAReward: question_weights must name at least one term with its weight, e.g. "
                              f"{{'local_occlusion': 1.0}}; got {question_weights!r}")
         self.question_weights = {str(k): finite_number(self, f"question_weights[{k!r}]", v) for k, v in question_weights.items()}
         self._term_keys = [(keys.REWARD_TERMS, k) for k in self.question_weights]
-        super().__init__(in_keys=[keys.EXPLORATION, keys.BETA, keys.SIMPLE_SCENE, keys.IS_STOP, *self._term_keys],
+        self.explore_key = explore_key
+        super().__init__(in_keys=[explore_key, keys.BETA, keys.SIMPLE_SCENE, keys.IS_STOP, *self._term_keys],
                          out_keys=[keys.REWARD])
         self.stop_reward = finite_number(self, "stop_reward", stop_reward)
         self.early_stop_penalty = finite_number(self, "early_stop_penalty", early_stop_penalty)
@@ -76,7 +79,7 @@ class MQAReward(Transform):
         stop = required(self, after, keys.IS_STOP, "next").bool()
         used = ~stop & ~simple
         beta = self._used(after, keys.BETA, used)
-        push = beta * self._used(after, keys.EXPLORATION, used) + (1 - beta) * self.question_reward(after, used)
+        push = beta * self._used(after, self.explore_key, used) + (1 - beta) * self.question_reward(after, used)
         stop_r = torch.where(simple, torch.full_like(push, self.stop_reward), torch.full_like(push, self.early_stop_penalty))
         push_r = torch.where(simple, torch.full_like(push, self.redundant_push_reward), push)
         total = torch.where(stop, stop_r, push_r)

@@ -1,4 +1,4 @@
-"""R_g and R_l: how much a push uncovered the question's target objects.
+"""R_g and R_l: how much a push uncovered the question's target objects; R_s: the whole scene.
 
 Both read the overlap χ before and after the action on the targets (``target_mask`` before it): χ
 of a target must be finite; non-target and padding slots are ignored, whatever they hold.
@@ -72,3 +72,21 @@ class LocalOcclusionReward(RewardTerm):
             raise ValueError(f"LocalOcclusionReward: {keys.QUESTION_TYPE!r} must index QUESTION_TYPES "
                              f"[0, {len(QUESTION_TYPES)}), got {qtype.tolist()}")
         return torch.where(self._use_min.to(qtype.device)[qtype], r_min, r_max)
+
+
+class SceneOcclusionReward(RewardTerm):
+    """R_s = (χ_a − χ_a') / χ_a over EVERY object: how much the push uncluttered the scene.
+
+    Not in the paper. It can stand in for R_e as the β-weighted, question-agnostic term
+    (``explore_term: scene_occlusion`` in a reward config): R_e pays for moving objects, which on a
+    pile also pays for shoving them onto it, while R_s pays for uncovering, whatever is asked; and
+    it averages over all the scene's objects, so it is far less noisy than R_g over 1-3 targets.
+    """
+
+    out_key = keys.SCENE_OCCLUSION
+
+    def compute(self, before, after) -> torch.Tensor:
+        objects = required(self, before, keys.OBJECT_MASK, "root")
+        chi0 = self.measured(before, keys.OVERLAP, "root", objects)
+        chi1 = self.measured(after, keys.OVERLAP, "next", objects)
+        return global_occlusion_reward(chi0, chi1, objects)
