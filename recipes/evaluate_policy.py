@@ -20,42 +20,16 @@ from pathlib import Path
 import hydra
 import torch
 from omegaconf import DictConfig, OmegaConf
-from torchrl.checkpoint import Checkpoint, CheckpointRotation
 
-from mqa_rl import keys
 from mqa_rl.envs.factory import make_mqa_env
 from mqa_rl.envs.qmap_overlay import qmap_episode_frames
 from mqa_rl.envs.video import write_video
 from mqa_rl.evaluation.episode_metrics import mean_ci95
 from mqa_rl.evaluation.rollouts import run_episodes
-from mqa_rl.modules.push_policy import make_push_qnet, make_q_actor
+from mqa_rl.modules.push_policy import load_greedy
 from mqa_rl.modules.random_policy import RandomMQAPolicy
-from mqa_rl.training.checkpoint import CheckpointCorrupt
 
 REPORTED = ("reward", "pushes", "final_simple", "chi_end", "chi_change", "hidden_end", "stopped")
-
-
-def load_greedy(run: Path, checkpoint: str | None, env):
-    """The trained Q-network of ``run`` (its config.yaml and newest or given checkpoint), greedy."""
-    cfg_path = run / "config.yaml"
-    if not cfg_path.exists():
-        raise FileNotFoundError(f"{cfg_path} not found: run= must be a recipes/train_dqn.py output folder")
-    cfg = OmegaConf.load(cfg_path)
-    net = make_push_qnet(cfg.model, vocab_size=env.observation_spec[keys.QUESTION].space.n,
-                         camera_distance=env.base_env.camera.distance)
-    actor = make_q_actor(net, env.action_spec, masked=cfg.action_mask)
-    path = Path(checkpoint) if checkpoint else None
-    if path is None:
-        rotation = CheckpointRotation(run / "checkpoints", keep_last=1)
-        path = rotation.latest() if rotation.directory.exists() else None
-        if path is None:
-            raise FileNotFoundError(f"no checkpoint in {run / 'checkpoints'}: train first, or give checkpoint=...")
-    try:
-        Checkpoint(policy=actor).load(path, components=["policy"], strict="error", map_location="cpu")
-    except Exception as error:
-        raise CheckpointCorrupt(f"cannot load the policy from {path} ({error}); is it a train_dqn.py checkpoint "
-                                f"of this run's config?") from error
-    return actor.eval(), cfg, path
 
 
 @hydra.main(config_path="conf", config_name="evaluate_policy", version_base="1.3")

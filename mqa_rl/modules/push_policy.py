@@ -8,13 +8,17 @@ of the env's action spec (``EGreedyModule`` writes the mask into its spec).
 from __future__ import annotations
 
 from collections.abc import Mapping
+from pathlib import Path
 
+from omegaconf import OmegaConf
 from tensordict.nn import TensorDictSequential
+from torchrl.checkpoint import Checkpoint, CheckpointRotation
 from torchrl.data import Composite
 from torchrl.modules import EGreedyModule, QValueActor
 
 from mqa_rl import keys
 from mqa_rl.modules.push_qnet import PushQNet
+from mqa_rl.training.checkpoint import CheckpointCorrupt
 
 QNET_OPTIONS = {"trunk", "weights", "light_channels", "light_downsample", "fuse_channels", "question_dim", "head_channels",
                 "head_context", "coords", "depth_scale", "freeze_trunk"}
@@ -42,3 +46,27 @@ def make_explorer(actor: QValueActor, action_spec, *, eps_init: float, eps_end: 
     greedy = EGreedyModule(spec=action_spec.clone(), eps_init=eps_init, eps_end=eps_end,
                            annealing_num_steps=annealing_frames, action_mask_key=keys.ACTION_MASK if masked else None)
     return TensorDictSequential(actor, greedy)
+
+
+def load_greedy(run: Path, checkpoint: str | None, env):
+    """The trained Q-network of ``run`` (its config.yaml and newest or given checkpoint), greedy, sized from
+    ``env`` (a ``SapienBinEnv`` or the recipes' ``TransformedEnv`` of one); returns (actor, run config, checkpoint path)."""
+    cfg_path = run / "config.yaml"
+    if not cfg_path.exists():
+        raise FileNotFoundError(f"{cfg_path} not found: run= must be a recipes/train_dqn.py output folder")
+    cfg = OmegaConf.load(cfg_path)
+    net = make_push_qnet(cfg.model, vocab_size=env.observation_spec[keys.QUESTION].space.n,
+                         camera_distance=getattr(env, "base_env", env).camera.distance)
+    actor = make_q_actor(net, env.action_spec, masked=cfg.action_mask)
+    path = Path(checkpoint) if checkpoint else None
+    if path is None:
+        rotation = CheckpointRotation(run / "checkpoints", keep_last=1)
+        path = rotation.latest() if rotation.directory.exists() else None
+        if path is None:
+            raise FileNotFoundError(f"no checkpoint in {run / 'checkpoints'}: train first, or give checkpoint=...")
+    try:
+        Checkpoint(policy=actor).load(path, components=["policy"], strict="error", map_location="cpu")
+    except Exception as error:
+        raise CheckpointCorrupt(f"cannot load the policy from {path} ({error}); is it a train_dqn.py checkpoint "
+                                f"of this run's config?") from error
+    return actor.eval(), cfg, path
