@@ -64,6 +64,8 @@ REPEAT = "repeat"                             # int64 [] which rollout of this q
 PUSHES = "pushes"                             # int64 [] pushes executed
 STOPPED = "stopped"                           # bool [] the policy stopped (else the push budget ended the episode)
 EPISODE_TARGETS = "target_mask"               # bool [K] objects of the question's class(es)
+CHI_START = "chi_start"                       # float32 [] mean χ of the targets on I_start (NaN without target)
+CHI_END = "chi_end"                           # float32 [] the same on I_stop
 FIRST = "first"
 LAST = "last"
 FIRST_RGB = (FIRST, RGB)                      # uint8 [3, H, W] I_start
@@ -73,12 +75,10 @@ LAST_DEPTH = (LAST, DEPTH)
 FRAME_OVERLAP = "overlap"                     # under FIRST / LAST: float32 [K] χ of every object
 FRAME_VISIBLE = "visible_area"                # under FIRST / LAST: float32 [K] A_s
 FRAME_FULL = "full_area"                      # under FIRST / LAST: float32 [K] A_t
+CLASS_MAP = "class_map"                       # under FIRST / LAST: uint8 [H, W] 0 = bin, 1 + index into MQADataset.classes
 
 # the VQA (mqa_rl.modules.vqa) and its loss (mqa_rl.losses.vqa)
 FIRST_FEATURES = (FIRST, "features")          # float32 [C, h, w] frozen encoder features of I_start (cached)
 LAST_FEATURES = (LAST, "features")
 ANSWER_LOGITS = "answer_logits"               # float32 [n_answers]
 FRAME_ATTENTION = "frame_attention"           # float32 [2] attention over (I_start, I_stop), sums to 1
-
-# encoder pretraining frames (recipes/pretrain_vqa_encoder.py): one rendered frame per record
-CLASS_MAP = "class_map"                       # uint8 [H, W] 0 = bin / background, 1 + index into MQADataset.classes

@@ -36,8 +36,10 @@ from pathlib import Path
 
 import torch
 import torch.nn.functional as F
+from tensordict.nn import TensorDictModule
 from torch import nn
 
+from mqa_rl import keys
 from mqa_rl.data.vocab import PAD, UNK, words
 from mqa_rl.modules.push_qnet import QuestionEncoder
 from mqa_rl.modules.vqa_encoder import FrameEncoder
@@ -202,6 +204,25 @@ class VQAModel(nn.Module):
             raise ValueError(f"this VQA was trained with another question or answer vocabulary than {dataset.root}'s "
                              f"({len(self.vocab)} vs {len(dataset.vocab)} words, answers {self.answers} vs "
                              f"{list(dataset.answers)}): retrain it on this dataset's rollouts")
+
+
+class _FromFeatures(nn.Module):
+    def __init__(self, model: VQAModel):
+        super().__init__()
+        self.model = model
+
+    def forward(self, question, first, last):
+        return self.model.forward_features(question, first, last)
+
+
+def vqa_module(model: VQAModel, *, from_features: bool = False) -> TensorDictModule:
+    """The VQA as a TensorDict module: reads the question and both frames' rgb (or, with
+    ``from_features``, the frozen encoder's cached features), writes answer logits and frame attention."""
+    if from_features:
+        return TensorDictModule(_FromFeatures(model), in_keys=[keys.QUESTION, keys.FIRST_FEATURES, keys.LAST_FEATURES],
+                                out_keys=[keys.ANSWER_LOGITS, keys.FRAME_ATTENTION])
+    return TensorDictModule(model, in_keys=[keys.QUESTION, keys.FIRST_RGB, keys.LAST_RGB],
+                            out_keys=[keys.ANSWER_LOGITS, keys.FRAME_ATTENTION])
 
 
 # ----------------------------------------------------------------------------------------- files
