@@ -149,6 +149,8 @@ def train(cfg: DictConfig) -> dict:
         path = ckpt.load()
         dropped = trim_scalars(out / "csv", state["step"])
         print(f"resumed from {path} at step {state['step']} ({dropped} log rows after it dropped)")
+    elif cfg.resume:
+        print(f"resume=true but no checkpoint in {ckpt.directory}: starting a new run")
     config = OmegaConf.to_container(cfg, resolve=True)
     if not (out / "config.yaml").exists():
         tmp = out / f".config.yaml.tmp{os.getpid()}"

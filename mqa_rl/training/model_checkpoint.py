@@ -30,7 +30,15 @@ class ModelCheckpoint:
         return self.rotation.save(self.checkpoint, step=int(step))
 
     def latest(self) -> Path | None:
-        return self.rotation.latest() if self.directory.exists() else None
+        """The newest readable checkpoint; ``CheckpointCorrupt`` if there are checkpoints but none can be
+        read (rather than silently starting afresh over a run's logs)."""
+        latest = self.rotation.latest() if self.directory.exists() else None
+        if latest is None and self.directory.exists():
+            found = sorted(p.name for p in self.directory.glob("checkpoint-*"))
+            if found:
+                raise CheckpointCorrupt(f"{self.directory} holds {found} but none can be read (no valid manifest): "
+                                        f"delete them to start afresh, or choose another out_dir")
+        return latest
 
     def load(self, path: str | Path | None = None) -> Path:
         """Restore every component in place from ``path`` (default: the newest checkpoint)."""
