@@ -75,10 +75,11 @@ LAST_DEPTH = (LAST, DEPTH)
 FRAME_OVERLAP = "overlap"                     # under FIRST / LAST: float32 [K] χ of every object
 FRAME_VISIBLE = "visible_area"                # under FIRST / LAST: float32 [K] A_s
 FRAME_FULL = "full_area"                      # under FIRST / LAST: float32 [K] A_t
-CLASS_MAP = "class_map"                       # under FIRST / LAST: uint8 [H, W] 0 = bin, 1 + index into MQADataset.classes
+OBJECT_MAP = "object_map"                     # under FIRST / LAST: uint8 [H, W] 0 = bin, 1 + the object's slot (scene order)
+CLASS_MAP = "class_map"                       # pretraining frames: uint8 [H, W] 0 = bin, 1 + index into MQADataset.classes
 
 # the VQA (mqa_rl.modules.vqa) and its loss (mqa_rl.losses.vqa)
-FIRST_FEATURES = (FIRST, "features")          # float32 [C, h, w] frozen encoder features of I_start (cached)
+FIRST_FEATURES = (FIRST, "features")          # float [C, h, w] VQAModel.encode_frames(I_start), cached when frozen
 LAST_FEATURES = (LAST, "features")
 ANSWER_LOGITS = "answer_logits"               # float32 [n_answers]
 FRAME_ATTENTION = "frame_attention"           # float32 [2] attention over (I_start, I_stop), sums to 1

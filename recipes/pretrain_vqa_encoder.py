@@ -50,7 +50,7 @@ def _sigterm_to_exit(signum, frame):
 def augment(batch: TensorDict) -> TensorDict:
     """The same random dihedral transform of rgb, depth and class map, per frame."""
     k = torch.randint(DIHEDRAL, (batch.shape[0],))
-    for key in (keys.RGB, keys.DEPTH, keys.CLASS_MAP):
+    for key in (keys.RGB, keys.DEPTH, keys.CLASS_MAP, keys.OBJECT_MAP):
         x = batch.get(key).clone()
         for t in k.unique().tolist():
             x[k == t] = dihedral(x[k == t], t)
@@ -86,13 +86,13 @@ def pretrain(cfg: DictConfig) -> dict:
     device = torch.device(cfg.device)
     ds = MQADataset(cfg.dataset)
     t0 = time.perf_counter()
-    frames = pretraining_frames(list(cfg.frames.stores), max_frames=cfg.frames.max_frames, seed=cfg.seed)
+    frames = pretraining_frames(list(cfg.frames.stores), ds, max_frames=cfg.frames.max_frames, seed=cfg.seed)
     val_mask = scene_split(frames, cfg.frames.val_fraction, cfg.seed)
     train_frames, val_frames = frames[~val_mask], frames[val_mask]
     print(f"{len(train_frames)} training frames, {len(val_frames)} validation frames "
           f"({time.perf_counter() - t0:.0f} s to read)", flush=True)
 
-    encoder = FrameEncoder(tuple(cfg.encoder.channels), cfg.encoder.image_size)
+    encoder = FrameEncoder(tuple(cfg.encoder.channels), cfg.encoder.image_size, num_classes=1 + len(ds.classes))
     heads = PretrainHeads(encoder.out_shape[0], num_classes=1 + len(ds.classes), width=cfg.heads.width)
     loss = EncoderPretrainLoss(encoder, heads, camera_distance=ds.camera.distance,
                                weights=OmegaConf.to_container(t.weights)).to(device)
@@ -110,6 +110,9 @@ def pretrain(cfg: DictConfig) -> dict:
         print(f"resumed from {path} at step {state['step']} ({dropped} log rows after it dropped)")
     elif cfg.resume:
         print(f"resume=true but no checkpoint in {ckpt.directory}: starting a new run")
+    if state["step"] >= t.steps and (out / ENCODER_FILE).exists():
+        print(f"{out} has finished its {state['step']} steps already (raise train.steps to train on)")
+        return json.loads((out / "summary.json").read_text()) if (out / "summary.json").exists() else dict(state)
     config = OmegaConf.to_container(cfg, resolve=True)
     if not (out / "config.yaml").exists():
         tmp = out / f".config.yaml.tmp{os.getpid()}"
@@ -127,7 +130,7 @@ def pretrain(cfg: DictConfig) -> dict:
             batch = train_frames[torch.randint(len(train_frames), (t.batch_size,))]
             batch = (augment(batch) if t.augment else batch).to(device)
             td = loss(batch)
-            total = td["loss_rgb"] + td["loss_height"] + td["loss_class"]
+            total = sum(v for k, v in td.items() if k.startswith("loss_"))
             optim.zero_grad()
             total.backward()
             torch.nn.utils.clip_grad_norm_(params, t.max_grad_norm)

@@ -63,13 +63,16 @@ def check_config(cfg: DictConfig) -> None:
 def build_model(cfg: DictConfig, ds: MQADataset) -> tuple[VQAModel, dict]:
     """The VQA for ``ds``'s vocabularies with the pretrained encoder (if given) loaded."""
     options = {k: cfg.vqa[k] for k in MODEL_OPTIONS}
-    model = VQAModel(ds.vocab.itos, ds.answers, freeze_encoder=bool(cfg.encoder.freeze), **options)
+    model = VQAModel(ds.vocab.itos, ds.answers, freeze_encoder=bool(cfg.encoder.freeze), encoder_classes=1 + len(ds.classes),
+                     **options)
     encoder_meta = {}
     if cfg.encoder.weights:
         encoder, encoder_meta = load_encoder(cfg.encoder.weights)
-        if encoder.image_size != model.encoder.image_size or encoder.channels != model.encoder.channels:
-            raise ValueError(f"encoder {cfg.encoder.weights} has image size {encoder.image_size} and channels "
-                             f"{encoder.channels}, the VQA needs {model.encoder.image_size} and {model.encoder.channels}")
+        found = (encoder.image_size, encoder.channels, encoder.num_classes)
+        needed = (model.encoder.image_size, model.encoder.channels, model.encoder.num_classes)
+        if found != needed:
+            raise ValueError(f"encoder {cfg.encoder.weights} has (image size, channels, classes) {found}, the VQA "
+                             f"needs {needed}: pretrain it again for this dataset and vqa config")
         if encoder_meta.get("dataset_sha256") not in (None, dataset_fingerprint(ds.root)):
             warnings.warn(f"encoder {cfg.encoder.weights} was pretrained on another dataset", stacklevel=2)
         model.encoder.load_state_dict(encoder.state_dict())
@@ -117,9 +120,28 @@ def train(cfg: DictConfig) -> dict:
     model, encoder_meta = build_model(cfg, ds)
     model.to(device)
 
+    frozen = bool(cfg.encoder.freeze)
+    loss = VQALoss(vqa_module(model, from_features=frozen), label_smoothing=cfg.train.label_smoothing)
+    params = [p for p in model.parameters() if p.requires_grad]
+    optim = torch.optim.Adam(params, lr=cfg.train.lr, weight_decay=cfg.train.weight_decay)
+    state = {"step": 0, "best_val": -1.0, "best_step": -1, "train_seconds": 0.0}
+    ckpt = ModelCheckpoint(out / "checkpoints", model=model, optimizer=optim, state=state, keep_last=cfg.checkpoint.keep_last)
+    if ckpt.latest() is not None:
+        if not cfg.resume:
+            raise FileExistsError(f"{out} already holds checkpoints ({ckpt.latest().name}): pass resume=true to "
+                                  f"continue that run, or choose another out_dir")
+        path = ckpt.load()
+        dropped = trim_scalars(out / "csv", state["step"])
+        print(f"resumed from {path} at step {state['step']} ({dropped} log rows after it dropped)")
+    elif cfg.resume:
+        print(f"resume=true but no checkpoint in {ckpt.directory}: starting a new run")
+    steps = int(cfg.train.steps)
+    if state["step"] >= steps and (out / CHECKPOINT_NAME).exists():
+        print(f"{out} has finished its {state['step']} steps already (raise train.steps to train on)")
+        return json.loads((out / "summary.json").read_text()) if (out / "summary.json").exists() else dict(state)
+
     # ---- data: cached frozen features, or images for fine-tuning
     t0 = time.perf_counter()
-    frozen = bool(cfg.encoder.freeze)
     if frozen:
         transforms = DIHEDRAL if cfg.train.augment else 1
         bar = tqdm(total=int(meta["slots"]) * 2, unit="frame", desc=f"encoding ×{transforms}", disable=not cfg.logger.progress)
@@ -137,20 +159,6 @@ def train(cfg: DictConfig) -> dict:
     print(f"{cfg.system}: {len(train_set)} training episodes, {int(val_mask.sum())} validation episodes "
           f"({'frozen encoder, features' if frozen else 'fine-tuned encoder'}: {feature_seconds:.0f} s)", flush=True)
 
-    loss = VQALoss(vqa_module(model, from_features=frozen), label_smoothing=cfg.train.label_smoothing)
-    params = [p for p in model.parameters() if p.requires_grad]
-    optim = torch.optim.Adam(params, lr=cfg.train.lr, weight_decay=cfg.train.weight_decay)
-    state = {"step": 0, "best_val": -1.0, "best_step": -1, "train_seconds": 0.0}
-    ckpt = ModelCheckpoint(out / "checkpoints", model=model, optimizer=optim, state=state, keep_last=cfg.checkpoint.keep_last)
-    if ckpt.latest() is not None:
-        if not cfg.resume:
-            raise FileExistsError(f"{out} already holds checkpoints ({ckpt.latest().name}): pass resume=true to "
-                                  f"continue that run, or choose another out_dir")
-        path = ckpt.load()
-        dropped = trim_scalars(out / "csv", state["step"])
-        print(f"resumed from {path} at step {state['step']} ({dropped} log rows after it dropped)")
-    elif cfg.resume:
-        print(f"resume=true but no checkpoint in {ckpt.directory}: starting a new run")
     config = OmegaConf.to_container(cfg, resolve=True)
     if not (out / "config.yaml").exists():
         tmp = out / f".config.yaml.tmp{os.getpid()}"
@@ -163,7 +171,6 @@ def train(cfg: DictConfig) -> dict:
                 "encoder": {"weights": cfg.encoder.weights, "frozen": frozen, **encoder_meta},
                 "train_episodes": len(train_set), "val_episodes": int(val_mask.sum())}
 
-    steps = int(cfg.train.steps)
     bar = tqdm(total=steps, initial=state["step"], unit="step", dynamic_ncols=True, disable=not cfg.logger.progress)
     window_loss, window_acc, t_start = [], [], time.perf_counter()
     try:

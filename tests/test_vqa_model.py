@@ -22,7 +22,7 @@ def _batch(model, b=3, size=224):
     return q, first, last
 
 
-@pytest.mark.parametrize("pool", ["eqa", "cells"])
+@pytest.mark.parametrize("pool", ["eqa", "cells", "classes"])
 @pytest.mark.parametrize("frozen", [True, False])
 def test_forward_backward_and_attention_over_two_frames(pool, frozen):
     torch.manual_seed(0)
@@ -32,7 +32,10 @@ def test_forward_backward_and_attention_over_two_frames(pool, frozen):
     assert logits.shape == (3, len(ANSWERS)) and attention.shape == (3, 2)
     assert torch.allclose(attention.sum(-1), torch.ones(3)) and (attention >= 0).all()
     torch.nn.functional.cross_entropy(logits, torch.tensor([1, 4, 2])).backward()
-    enc_grads = [p.grad for p in model.encoder.parameters()]
+    # "classes" reads the class head on the third block; the others read the fourth block's bottleneck
+    used = [*model.encoder.net[:12].parameters(), *model.encoder.class_head.parameters()] if pool == "classes" \
+        else list(model.encoder.net.parameters())
+    enc_grads = [p.grad for p in used]
     if frozen:
         assert all(g is None for g in enc_grads) and not model.encoder.training     # BN statistics stay fixed
     else:

@@ -31,7 +31,7 @@ def _squares(counts: torch.Tensor, gen: torch.Generator) -> torch.Tensor:
     return images
 
 
-@pytest.mark.parametrize("pool", ["eqa", "cells"])
+@pytest.mark.parametrize("pool", ["eqa", "cells"])       # "classes" needs a pretrained class head (see below)
 def test_vqa_loss_decreases_on_a_fixed_batch(pool):
     torch.manual_seed(0)
     gen = torch.Generator().manual_seed(0)
@@ -44,14 +44,15 @@ def test_vqa_loss_decreases_on_a_fixed_batch(pool):
     with torch.no_grad():
         first = loss(batch)
     assert set(first.keys()) == {"loss_vqa", "accuracy"} and 0 <= float(first["accuracy"]) <= 1
-    for _ in range(40):
+    for _ in range(60):
         out = loss(batch)
         optim.zero_grad()
         out["loss_vqa"].backward()
         optim.step()
     with torch.no_grad():
         last = loss(batch)
-    assert float(last["loss_vqa"]) < 0.6 * float(first["loss_vqa"])
+    # a frozen random encoder: the question-conditioned pools have less to work with than EQA's linear layer
+    assert float(last["loss_vqa"]) < (0.5 if pool == "eqa" else 0.75) * float(first["loss_vqa"])
     assert float(last["accuracy"]) > float(first["accuracy"])
     loss.set_keys(answer="other")                                       # keys are declared once, renamable
     assert "other" in loss.in_keys and keys.ANSWER_LABEL not in loss.in_keys
@@ -66,19 +67,24 @@ def test_dihedral_transforms_are_the_8_symmetries_of_the_square():
 def test_encoder_pretrains_on_a_few_frames(small_dataset, answering_root, tmp_path):
     root, _ = answering_root
     store = root / "rollouts" / "counting" / "random" / "train"
-    frames = pretraining_frames([store], max_frames=4, seed=0)
+    frames = pretraining_frames([store], small_dataset, max_frames=4, seed=0)
     assert frames.shape == (4,) and frames[keys.CLASS_MAP].dtype == torch.uint8
-    all_frames = pretraining_frames([store])
+    for f in frames:                                         # classes follow from the objects' slots
+        objects = small_dataset.scenes[int(f[keys.SCENE])].objects
+        j = int(f[keys.OBJECT_MAP].max())
+        name = small_dataset.classes[int(f[keys.CLASS_MAP][f[keys.OBJECT_MAP] == j][0]) - 1]
+        assert name == objects[j - 1].class_name
+    all_frames = pretraining_frames([store], small_dataset)
     scenes = all_frames[keys.SCENE].tolist()
     assert len(all_frames) <= len(set(scenes)) + 12           # each scene's first image once, then pushed ones
     torch.manual_seed(0)
-    encoder = FrameEncoder()
+    encoder = FrameEncoder(num_classes=1 + len(small_dataset.classes))
     loss = EncoderPretrainLoss(encoder, PretrainHeads(32, 1 + len(small_dataset.classes)),
                                camera_distance=small_dataset.camera.distance)
     optim = torch.optim.Adam(loss.parameters(), lr=2e-3)
 
     def total(out):
-        return out["loss_rgb"] + out["loss_height"] + out["loss_class"]
+        return sum(v for k, v in out.items() if k.startswith("loss_"))
 
     with torch.no_grad():
         start = float(total(loss(frames)))
@@ -91,6 +97,7 @@ def test_encoder_pretrains_on_a_few_frames(small_dataset, answering_root, tmp_pa
     with torch.no_grad():
         end = loss(frames)
     assert float(total(end)) < 0.7 * start and 0 <= float(end["class_accuracy"]) <= 1
+    assert 0 <= float(end["count_exact"]) <= 1
     path = save_encoder(encoder, tmp_path / "encoder.pt", {"frames": 4})
     again, meta = load_encoder(path)
     assert meta == {"frames": 4} and torch.equal(again.state_dict()["net.0.weight"], encoder.state_dict()["net.0.weight"])

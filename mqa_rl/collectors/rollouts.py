@@ -73,25 +73,25 @@ def episode_seed(seed: int, slot: int) -> int:
 
 
 # ----------------------------------------------------------------------------------------- one episode
-def class_map(env: SapienBinEnv) -> torch.Tensor:
-    """uint8 [H, W] of the env's current image: 0 = bin and floor, 1 + class index (``dataset.classes``)
-    for object pixels. From the simulator's segmentation: a training label for the VQA's encoder
-    (as EQA pretrained its CNN on its simulator's), never an input of a policy or of the VQA."""
+def object_map(env: SapienBinEnv) -> torch.Tensor:
+    """uint8 [H, W] of the env's current image: 0 = bin and floor, 1 + the object's slot (the scene's
+    order, as ``info`` pads them) for object pixels. From the simulator's segmentation: training
+    labels for the VQA's encoder (classes, object centres; as EQA pretrained its CNN on its
+    simulator's), never an input of a policy or of the VQA."""
     gt = env.ground_truth()
     seg, ids = gt["seg"], gt["entity_ids"]
     lut = np.zeros(int(max(seg.max(), ids.max())) + 1, dtype=np.uint8)
-    classes = env.dataset.classes
-    lut[ids] = [1 + classes.index(a.class_name) for a in env.world.assets]
+    lut[ids] = np.arange(1, len(ids) + 1)
     return torch.from_numpy(lut[seg])
 
 
-def _frame(td, store_depth: bool, cmap: torch.Tensor | None) -> TensorDict:
+def _frame(td, store_depth: bool, omap: torch.Tensor | None) -> TensorDict:
     out = {keys.RGB: td.get(keys.RGB), keys.FRAME_OVERLAP: td.get(keys.OVERLAP),
            keys.FRAME_VISIBLE: td.get(keys.VISIBLE_AREA), keys.FRAME_FULL: td.get(keys.FULL_AREA)}
     if store_depth:
         out[keys.DEPTH] = td.get(keys.DEPTH).to(torch.float16)
-    if cmap is not None:
-        out[keys.CLASS_MAP] = cmap
+    if omap is not None:
+        out[keys.OBJECT_MAP] = omap
     return TensorDict(out, batch_size=[])
 
 
@@ -102,19 +102,19 @@ def _chi(td) -> torch.Tensor:
 
 def run_question_episode(env: SapienBinEnv, policy, exploration, question_index: int, *, max_pushes: int,
                          slot: int = 0, repeat: int = 0, seed: int = 0, store_depth: bool = True,
-                         store_class_map: bool = True) -> TensorDict:
+                         store_object_map: bool = True) -> TensorDict:
     """One episode of ``policy`` on a question (by index into the env's dataset) → its record."""
     question = env.dataset.questions[question_index]
     torch.manual_seed(episode_seed(seed, slot))
     td = env.reset(question_id=question.id)
-    first_map = class_map(env) if store_class_map else None
+    first_map = object_map(env) if store_object_map else None
     with torch.no_grad(), set_exploration_type(exploration):
         traj = env.rollout(max_pushes + 1, policy, auto_reset=False, tensordict=td, break_when_any_done=True)
     if not bool(traj["next", "done"][-1].item()):
         raise RuntimeError(f"episode of {question.id} did not end within {max_pushes + 1} steps: is the env's "
                            f"max_pushes larger than {max_pushes}?")
     first, last = traj[0], traj["next"][-1]
-    last_map = class_map(env) if store_class_map else None
+    last_map = object_map(env) if store_object_map else None
     scene = env.dataset.scene(question.scene_id)
     scalar = lambda v, dtype=torch.int64: torch.as_tensor(v, dtype=dtype).reshape(())   # noqa: E731
     return TensorDict({
@@ -185,7 +185,7 @@ class _InProcess:
 def collect_rollouts(out_dir, *, dataset, policy, split: str, question_types=("counting",), levels=None,
                      max_per_group: int | None = None, repeats: int = 1, max_pushes: int = 10, image_size: int = 224,
                      pusher: str = "finger", workers: int = 2, chunk_episodes: int = 32, seed: int = 0,
-                     store_depth: bool = True, store_class_map: bool = True, overwrite: bool = False,
+                     store_depth: bool = True, store_object_map: bool = True, overwrite: bool = False,
                      progress: bool = True) -> dict:
     """Collect (or finish collecting) the rollouts of ``policy`` (a spec, see ``frozen_policies``) into
     ``out_dir``; returns a summary with the time taken. See the module docstring."""
@@ -201,10 +201,10 @@ def collect_rollouts(out_dir, *, dataset, policy, split: str, question_types=("c
     tasks = [(i * reps + r, q, r) for i, q in enumerate(questions) for r in range(reps)]
     env_kwargs = {"max_pushes": int(max_pushes), "image_size": int(image_size), "pusher": pusher}
     run = {"max_pushes": int(max_pushes), "seed": int(seed), "store_depth": bool(store_depth),
-           "store_class_map": bool(store_class_map)}
+           "store_object_map": bool(store_object_map)}
     meta = {"schema": SCHEMA, "kind": "rollouts",
             "dataset": {"root": str(ds.root), "manifest_sha256": dataset_fingerprint(ds.root)},
-            "policy": spec, "env": env_kwargs, "stored": {"depth": bool(store_depth), "class_map": bool(store_class_map)},
+            "policy": spec, "env": env_kwargs, "stored": {"depth": bool(store_depth), "object_map": bool(store_object_map)},
             "plan": {"split": split, "question_types": question_types, "levels": list(levels or LEVELS),
                      "max_per_group": max_per_group, "repeats": reps, "seed": int(seed),
                      "questions_sha256": questions_sha256(questions)},
@@ -259,5 +259,5 @@ def collect_split(out_dir, split: str, *, dataset, policy, questions, collection
         max_per_group=questions["max_per_group"][split], repeats=int(collection["repeats"][split]),
         max_pushes=int(env["max_pushes"]), image_size=int(env["image_size"]), pusher=env["pusher"],
         workers=int(collection["workers"]), chunk_episodes=int(collection["chunk_episodes"]), seed=int(collection["seed"]),
-        store_depth=bool(collection["store_depth"]), store_class_map=bool(collection["store_class_map"]),
+        store_depth=bool(collection["store_depth"]), store_object_map=bool(collection["store_object_map"]),
         overwrite=overwrite, progress=progress)

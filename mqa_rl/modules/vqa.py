@@ -14,6 +14,16 @@ Frame vector (``pool``):
   (a soft area of what the question asks about, which grows with the count) through a linear
   layer. EQA's global linear layer must fold "how many of each of 20 classes" into 64 numbers
   before it knows the question; here the question picks what to pool.
+* ``"classes"`` (ours, for counting): the encoder's ``class_head`` and ``density_head`` (supervised in
+  pretraining with each cell's class areas and each visible object's centre) give class
+  probabilities and per-class object densities on the third block's 24 × 24 map (the 10 × 10
+  bottleneck is too coarse to count); the question picks classes (``heads`` softmaxes over them,
+  e.g. A and B for LOGIC), which gives a map of how much of the asked class each cell holds and
+  where its objects are; small convs on those maps, their means and maxima, and the maps' sums (the
+  second: a count of the visible objects of the asked class) → 64. The question-to-class choice
+  and how visible counts relate to answers is what must be learnt from answers, not what a can
+  looks like. What the frozen encoder computes (``encode_frames``, cached in training) is then
+  [2·21, 24, 24] instead of the bottleneck [32, 10, 10].
 
 Public contract (the web demo and ``recipes/evaluate.py`` use only this)::
 
@@ -42,12 +52,12 @@ from torch import nn
 from mqa_rl import keys
 from mqa_rl.data.vocab import PAD, UNK, words
 from mqa_rl.modules.push_qnet import QuestionEncoder
-from mqa_rl.modules.vqa_encoder import FrameEncoder
+from mqa_rl.modules.vqa_encoder import FrameEncoder, standardise
 
 VQA_FORMAT = "mqa_rl.vqa"
 VQA_VERSION = 1
 CHECKPOINT_NAME = "vqa.pt"          # what recipes/train_vqa.py writes into its out_dir
-POOLS = ("eqa", "cells")
+POOLS = ("eqa", "cells", "classes")
 TRAIN_HINT = "train one with `python recipes/train_vqa.py system=<name>` (it writes <out_dir>/vqa.pt)"
 
 
@@ -76,11 +86,38 @@ class QuestionCellPool(nn.Module):
         return self.out(self.norm(torch.cat([pooled, area], -1).flatten(1)))
 
 
+class QuestionClassPool(nn.Module):
+    """Question-selected class maps (``pool="classes"``): [N, 2K, h, w] (class log-probabilities, then
+    per-class object densities; ``FrameEncoder.class_maps``), q [N, D] → [N, D]."""
+
+    def __init__(self, num_classes: int, dim: int, heads: int, dropout: float, width: int = 16):
+        super().__init__()
+        self.select = nn.Linear(dim, heads * num_classes)
+        self.heads = heads
+        self.conv = nn.Sequential(nn.Conv2d(2 * heads, width, 3, padding=1), nn.ReLU(inplace=True),
+                                  nn.Conv2d(width, width, 3, padding=1), nn.ReLU(inplace=True))
+        self.norm = nn.LayerNorm(2 * width + 2 * heads)
+        self.out = nn.Sequential(nn.Linear(2 * width + 2 * heads, dim), nn.ReLU(inplace=True), nn.Dropout(dropout))
+
+    def forward(self, maps: torch.Tensor, q: torch.Tensor) -> torch.Tensor:
+        maps = maps.float()
+        k = maps.shape[1] // 2
+        probs, density = maps[:, :k].exp(), maps[:, k:]                           # [N, K, h, w] each
+        n = maps.shape[0]
+        choice = F.softmax(self.select(q).view(n, self.heads, k), dim=-1)        # [N, H, K]
+        area = torch.einsum("nhk,nkyx->nhyx", choice, probs)                     # share of the asked class per cell
+        objects = torch.einsum("nhk,nkyx->nhyx", choice, density)                # its objects' centres
+        both = torch.cat([area, objects], 1)
+        c = self.conv(both)
+        sums = both.flatten(2).sum(-1)                                           # [N, 2H]: area (cells), visible count
+        return self.out(self.norm(torch.cat([c.flatten(2).mean(-1), c.flatten(2).amax(-1), sums], -1)))
+
+
 class VQAModel(nn.Module):
     """Two-frame VQA (see the module docstring). Build with ``VQAModel(vocab, answers, **config)``."""
 
-    def __init__(self, vocab, answers, *, image_size: int = 224, encoder_channels=(8, 16, 32, 32), pool: str = "eqa",
-                 dim: int = 64, lstm_layers: int = 2, dropout: float = 0.5, cell_heads: int = 4,
+    def __init__(self, vocab, answers, *, image_size: int = 224, encoder_channels=(8, 16, 32, 32), encoder_classes: int = 21,
+                 pool: str = "eqa", dim: int = 64, lstm_layers: int = 2, dropout: float = 0.5, cell_heads: int = 4,
                  freeze_encoder: bool = True):
         super().__init__()
         self.vocab = list(vocab)
@@ -89,17 +126,20 @@ class VQAModel(nn.Module):
             raise ValueError(f"a question vocabulary starts with {PAD!r}, {UNK!r}; got {self.vocab[:2]}")
         if pool not in POOLS:
             raise ValueError(f"vqa pool={pool!r}; choose one of {POOLS}")
-        self.config = {"image_size": int(image_size), "encoder_channels": list(encoder_channels), "pool": pool,
+        self.config = {"image_size": int(image_size), "encoder_channels": list(encoder_channels),
+                       "encoder_classes": int(encoder_classes), "pool": pool,
                        "dim": int(dim), "lstm_layers": int(lstm_layers), "dropout": float(dropout),
                        "cell_heads": int(cell_heads), "freeze_encoder": bool(freeze_encoder)}
         self._stoi = {w: i for i, w in enumerate(self.vocab)}
-        self.encoder = FrameEncoder(tuple(encoder_channels), image_size)
+        self.encoder = FrameEncoder(tuple(encoder_channels), image_size, encoder_classes)
         c, h, w = self.encoder.out_shape
         self.pool = pool
         if pool == "eqa":
             self.image_fc = nn.Sequential(nn.Linear(c * h * w, dim), nn.ReLU(inplace=True), nn.Dropout(dropout))
-        else:
+        elif pool == "cells":
             self.image_fc = QuestionCellPool(c, dim, cell_heads, dropout)
+        else:
+            self.image_fc = QuestionClassPool(encoder_classes, dim, cell_heads, dropout)
         self.question = QuestionEncoder(len(self.vocab), embed=dim, hidden=dim, layers=lstm_layers, out=dim)
         self.img_tr = nn.Sequential(nn.Linear(dim, dim), nn.Dropout(dropout))
         self.ques_tr = nn.Sequential(nn.Linear(dim, dim), nn.Dropout(dropout))
@@ -124,8 +164,14 @@ class VQAModel(nn.Module):
 
     # ------------------------------------------------------------------------------------ forward
     def encode_frames(self, rgb: torch.Tensor) -> torch.Tensor:
-        """uint8 rgb [..., 3, H, W] → encoder features [..., C, h, w] (what a frozen encoder's cache holds)."""
-        return self.encoder.encode(rgb)
+        """uint8 rgb [..., 3, H, W] → what the image part of the model reads (and a frozen encoder's cache
+        holds): the bottleneck [..., 32, 10, 10], or for ``pool="classes"`` the class log-probabilities
+        and object densities [..., 2K, 24, 24]."""
+        if self.pool != "classes":
+            return self.encoder.encode(rgb)
+        batch = rgb.shape[:-3]
+        out = self.encoder.class_maps(standardise(rgb.reshape(-1, *rgb.shape[-3:]), self.encoder.image_size))
+        return out.reshape(*batch, *out.shape[1:])
 
     def forward_features(self, question: torch.Tensor, first: torch.Tensor, last: torch.Tensor):
         """(logits [B, A], attention [B, 2]) from tokens [B, L] and encoder features [B, C, h, w] of both frames."""

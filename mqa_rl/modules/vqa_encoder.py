@@ -8,7 +8,12 @@ depth) on its renders and froze it for VQA; ``PretrainHeads`` does the same on o
 gives per-object segmentation (hence per-class labels) and depth. Unlike EQA's FCN decoder, the
 heads decode from the 32 × 10 × 10 bottleneck only, with no skip connections from earlier layers:
 the VQA reads only the bottleneck, so what the heads must know (which class is where, how high)
-has to be in it. The targets are at a quarter of the input size (56 px: a 6 cm object still
+has to be in it. Two more heads belong to the encoder itself and read the third block's 24 × 24 map
+(the 10 × 10 bottleneck is too coarse to count: with the true class areas per cell, a VQA counted
+0.57 / 0.47 / 0.48 of the COUNTING test questions right from a 10 × 10 map, 0.67 / 0.56 / 0.51 from
+a 28 × 28 one; README): ``class_head`` (the class areas inside each cell) and ``density_head`` (a
+density map per class: one unit of mass at the centre of every visible object, so that its sum
+over the image is the number of visible objects of the class, as crowd counting does). The targets are at a quarter of the input size (56 px: a 6 cm object still
 covers ≥ 6 px), which keeps the decoder cheap; the encoder sees the full 224 px image.
 
 An encoder file (``save_encoder`` / ``load_encoder``) holds the encoder's weights and what it was
@@ -42,9 +47,13 @@ def standardise(rgb: torch.Tensor, size: int) -> torch.Tensor:
 
 
 class FrameEncoder(nn.Module):
-    """EQA's CNN: standardised rgb [B, 3, S, S] → features [B, 32, h, h] (h = 10 for S = 224)."""
+    """EQA's CNN: standardised rgb [B, 3, S, S] → features [B, 32, h, h] (h = 10 for S = 224).
 
-    def __init__(self, channels=(8, 16, 32, 32), image_size: int = 224):
+    It also carries ``class_head`` and ``density_head``, 1×1 convs from the third block's map (32 × 24 ×
+    24 at 224 px) to per-cell class logits and per-class object densities (background + the dataset's
+    classes): pretraining supervises them, and the VQA's ``pool="classes"`` reads them."""
+
+    def __init__(self, channels=(8, 16, 32, 32), image_size: int = 224, num_classes: int = 21):
         super().__init__()
         layers, cin = [], 3
         for cout in channels:
@@ -59,9 +68,27 @@ class FrameEncoder(nn.Module):
         if size < 1:
             raise ValueError(f"image_size={image_size} is too small for {len(channels)} conv 5×5 + pool blocks")
         self.out_shape = (cin, size, size)
+        self.num_classes = int(num_classes)
+        self.class_head = nn.Conv2d(channels[-2], self.num_classes, 1)
+        self.density_head = nn.Conv2d(channels[-2], self.num_classes, 1)
+        nn.init.constant_(self.density_head.bias, -6.0)      # softplus(-6) ≈ 0.0025: ~1.4 objects per class at first
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return self.net(x)
+
+    def features(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(third block's map [B, 32, 24, 24], bottleneck [B, 32, 10, 10]) of a standardised image."""
+        mid = self.net[: 4 * (len(self.channels) - 1)](x)
+        return mid, self.net[4 * (len(self.channels) - 1):](mid)
+
+    def heads_of(self, mid: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(class logits, object densities ≥ 0), each [B, K, 24, 24], from the third block's map."""
+        return self.class_head(mid), F.softplus(self.density_head(mid))
+
+    def class_maps(self, x: torch.Tensor) -> torch.Tensor:
+        """[B, 2K, 24, 24] of a standardised image: per-cell class log-probabilities, then per-class densities."""
+        logits, density = self.heads_of(self.net[: 4 * (len(self.channels) - 1)](x))
+        return torch.cat([F.log_softmax(logits, dim=1), density], 1)
 
     def encode(self, rgb: torch.Tensor) -> torch.Tensor:
         """uint8 rgb [..., 3, H, W] → features [..., C, h, w]."""
@@ -106,7 +133,8 @@ def save_encoder(encoder: FrameEncoder, path: str | Path, meta: dict) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     blob = {"format": ENCODER_FORMAT, "version": ENCODER_VERSION,
-            "config": {"channels": list(encoder.channels), "image_size": encoder.image_size},
+            "config": {"channels": list(encoder.channels), "image_size": encoder.image_size,
+                       "num_classes": encoder.num_classes},
             "state_dict": {k: v.detach().cpu() for k, v in encoder.state_dict().items()}, "meta": dict(meta)}
     tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
     torch.save(blob, tmp)
@@ -130,7 +158,7 @@ def load_encoder(path: str | Path) -> tuple[FrameEncoder, dict]:
     if int(blob.get("version", 0)) > ENCODER_VERSION:
         raise ValueError(f"{path} has encoder format version {blob['version']} > {ENCODER_VERSION}: update mqa_rl")
     cfg = blob["config"]
-    encoder = FrameEncoder(tuple(cfg["channels"]), int(cfg["image_size"]))
+    encoder = FrameEncoder(tuple(cfg["channels"]), int(cfg["image_size"]), int(cfg.get("num_classes", 21)))
     try:
         encoder.load_state_dict(blob["state_dict"])
     except RuntimeError as error:

@@ -128,19 +128,20 @@ class Batches:
             yield self.take(torch.arange(start, min(start + batch_size, len(self))))
 
 
-def pretraining_frames(stores, *, max_frames: int | None = None, seed: int = 0) -> TensorDict:
-    """Frames [N] (``RGB``, ``DEPTH``, ``CLASS_MAP``, ``SCENE``, ``LEVEL``) for pretraining the encoder, from rollout
-    stores collected with depth and class maps: each scene's first image once (it is the same for every
-    question of the scene) and every last image after at least one push; at most ``max_frames`` of them,
-    drawn with ``seed``."""
-    wanted = (keys.RGB, keys.DEPTH, keys.CLASS_MAP)
-    picks = []                                       # (chunk path, frame, row)
+def pretraining_frames(stores, dataset, *, max_frames: int | None = None, seed: int = 0) -> TensorDict:
+    """Frames [N] (``RGB``, ``DEPTH``, ``OBJECT_MAP``, ``CLASS_MAP``, ``SCENE``, ``LEVEL``) for pretraining the
+    encoder, from rollout stores collected with depth and object maps (``dataset``: the ``MQADataset`` they
+    were collected on, for the objects' classes): each scene's first image once (it is the same for
+    every question of the scene) and every last image after at least one push; at most ``max_frames``
+    of them, drawn with ``seed``."""
+    wanted = (keys.RGB, keys.DEPTH, keys.OBJECT_MAP)
+    picks = []                                       # (chunk path, frame, row, scene, level)
     seen_scenes = set()
     for store in stores:
         meta = read_meta(store)
-        if not (meta.get("stored", {}).get("depth") and meta.get("stored", {}).get("class_map")):
-            raise ValueError(f"{store} was collected without depth or class maps (store_depth / store_class_map "
-                             f"false): pretraining needs both")
+        if not (meta.get("stored", {}).get("depth") and meta.get("stored", {}).get("object_map")):
+            raise ValueError(f"{store} was collected without depth or object maps (collection.store_depth / "
+                             f"store_object_map false): pretraining needs both")
         for path in chunk_paths(store):
             chunk = TensorDict.load_memmap(path)
             scenes, levels = chunk.get(keys.SCENE).tolist(), chunk.get(keys.LEVEL).tolist()
@@ -161,6 +162,10 @@ def pretraining_frames(stores, *, max_frames: int | None = None, seed: int = 0) 
             cache.clear()
             cache[path] = TensorDict.load_memmap(path)
         frame = cache[path].get(which)[row].select(*wanted).clone()
+        objects = dataset.scenes[scene].objects
+        lut = torch.zeros(256, dtype=torch.uint8)
+        lut[1:len(objects) + 1] = torch.tensor([1 + dataset.classes.index(o.class_name) for o in objects], dtype=torch.uint8)
+        frame.set(keys.CLASS_MAP, lut[frame.get(keys.OBJECT_MAP).long()])
         frame.set(keys.SCENE, torch.tensor(scene))
         frame.set(keys.LEVEL, torch.tensor(level))
         frames.append(frame)
