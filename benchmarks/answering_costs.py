@@ -62,7 +62,7 @@ def learning_costs(ds: MQADataset) -> None:
     print(f"encode one frame (frozen encoder, no grad): {encode * 1e3:.1f} ms CPU")
     q = torch.tensor([list(ds.questions[0].tokens)] * 64)
     labels = torch.zeros(64, dtype=torch.int64)
-    for pool in ("eqa", "cells"):
+    for pool in ("eqa", "cells", "classes"):
         model = VQAModel(ds.vocab.itos, ds.answers, pool=pool).train()
         feats = model.encode_frames(img).detach()
         loss = VQALoss(vqa_module(model, from_features=True))

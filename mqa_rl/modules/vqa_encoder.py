@@ -8,13 +8,16 @@ depth) on its renders and froze it for VQA; ``PretrainHeads`` does the same on o
 gives per-object segmentation (hence per-class labels) and depth. Unlike EQA's FCN decoder, the
 heads decode from the 32 × 10 × 10 bottleneck only, with no skip connections from earlier layers:
 the VQA reads only the bottleneck, so what the heads must know (which class is where, how high)
-has to be in it. Two more heads belong to the encoder itself and read the third block's 24 × 24 map
-(the 10 × 10 bottleneck is too coarse to count: with the true class areas per cell, a VQA counted
-0.57 / 0.47 / 0.48 of the COUNTING test questions right from a 10 × 10 map, 0.67 / 0.56 / 0.51 from
-a 28 × 28 one; README): ``class_head`` (the class areas inside each cell) and ``density_head`` (a
-density map per class: one unit of mass at the centre of every visible object, so that its sum
-over the image is the number of visible objects of the class, as crowd counting does). The targets are at a quarter of the input size (56 px: a 6 cm object still
+has to be in it. Their targets are at a quarter of the input size (56 px: a 6 cm object still
 covers ≥ 6 px), which keeps the decoder cheap; the encoder sees the full 224 px image.
+
+Two more heads belong to the encoder itself and read the third block's 24 × 24 map, for the VQA's
+``pool="classes"``: ``class_head`` (the class areas inside each cell) and ``density_head`` (a density
+map per class: one unit of mass at the centre of every visible object, so that its sum over the
+image is the number of visible objects of the class, as crowd counting does). The 10 × 10
+bottleneck is too coarse to count: with the true class areas per cell, a VQA answered 0.57 / 0.51 /
+0.51 of the COUNTING test questions right from a 10 × 10 map, 0.69 / 0.51 / 0.51 from a 24 × 24 one
+(``benchmarks/vqa_ceiling.py``, README).
 
 An encoder file (``save_encoder`` / ``load_encoder``) holds the encoder's weights and what it was
 trained on; ``recipes/pretrain_vqa_encoder.py`` writes it and ``recipes/train_vqa.py`` loads it
