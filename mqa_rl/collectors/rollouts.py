@@ -161,8 +161,10 @@ def _worker_init(dataset_root: str, env_kwargs: dict, spec: dict, run: dict, par
     _WORKER.update(_build(dataset_root, env_kwargs, spec, run))
 
 
-def _worker_episode(task: tuple[int, int, int]) -> TensorDict:
-    return _episode(_WORKER, task)
+def _worker_episode(task: tuple[int, int, int]) -> dict:
+    # numpy, not tensors: torch would pass tensors as shared-memory file descriptors, ~25 per record,
+    # and a chunk's worth of records in flight can exceed a 1024 open-files limit
+    return _episode(_WORKER, task).numpy()
 
 
 class _InProcess:
@@ -224,6 +226,7 @@ def collect_rollouts(out_dir, *, dataset, policy, split: str, question_types=("c
         buffer: list[TensorDict] = []
         try:
             for record in pool.imap_unordered(_worker_episode, todo, chunksize=1):
+                record = record if isinstance(record, TensorDict) else TensorDict(record, batch_size=[])
                 buffer.append(record)
                 new += 1
                 pushes += int(record[keys.PUSHES])
