@@ -54,3 +54,35 @@ EPISODE = "episode"
 EPISODE_REWARD = (EPISODE, "reward")                   # float32 [1] sum of rewards so far
 EPISODE_TERMS = (EPISODE, "terms")                     # float32 [1] each: sums of the reward terms so far
 TARGET_CHI_START = (EPISODE, "target_chi_start")       # float32 [1] mean target χ at reset (0 without target)
+
+# one answering episode (mqa_rl.collectors.rollouts): what the VQA reads and what the reports need,
+# stored per episode in a memmap TensorDict; FIRST / LAST hold the images I_start / I_stop
+SLOT = "slot"                                 # int64 [] position in the collection plan (unique: the resume key)
+QUESTION_ID = "question_index"                # int64 [] index into MQADataset.questions
+ANSWER_LABEL = "answer_label"                 # int64 [] index into MQADataset.answers (the oracle answer)
+TYPE_LABEL = "type_label"                     # int64 [] index into mqa_rl.data.questions.QUESTION_TYPES
+LEVEL = "level"                               # int64 [] index into mqa_rl.data.dataset.LEVELS
+SCENE = "scene"                               # int64 [] index into MQADataset.scenes
+REPEAT = "repeat"                             # int64 [] which rollout of this question (0, 1, ...)
+PUSHES = "pushes"                             # int64 [] pushes executed
+STOPPED = "stopped"                           # bool [] the policy stopped (else the push budget ended the episode)
+EPISODE_TARGETS = "target_mask"               # bool [K] objects of the question's class(es)
+CHI_START = "chi_start"                       # float32 [] mean χ of the targets on I_start (NaN without target)
+CHI_END = "chi_end"                           # float32 [] the same on I_stop
+FIRST = "first"
+LAST = "last"
+FIRST_RGB = (FIRST, RGB)                      # uint8 [3, H, W] I_start
+LAST_RGB = (LAST, RGB)                        # uint8 [3, H, W] I_stop
+FIRST_DEPTH = (FIRST, DEPTH)                  # float16 [1, H, W] metres
+LAST_DEPTH = (LAST, DEPTH)
+FRAME_OVERLAP = "overlap"                     # under FIRST / LAST: float32 [K] χ of every object
+FRAME_VISIBLE = "visible_area"                # under FIRST / LAST: float32 [K] A_s
+FRAME_FULL = "full_area"                      # under FIRST / LAST: float32 [K] A_t
+OBJECT_MAP = "object_map"                     # under FIRST / LAST: uint8 [H, W] 0 = bin, 1 + the object's slot (scene order)
+CLASS_MAP = "class_map"                       # pretraining frames: uint8 [H, W] 0 = bin, 1 + index into MQADataset.classes
+
+# the VQA (mqa_rl.modules.vqa) and its loss (mqa_rl.losses.vqa)
+FIRST_FEATURES = (FIRST, "features")          # float [C, h, w] VQAModel.encode_frames(I_start), cached when frozen
+LAST_FEATURES = (LAST, "features")
+ANSWER_LOGITS = "answer_logits"               # float32 [n_answers]
+FRAME_ATTENTION = "frame_attention"           # float32 [2] attention over (I_start, I_stop), sums to 1

@@ -58,3 +58,44 @@ def assert_bit_identical_replays():
                 assert torch.equal(x[key], y[key]), key
 
     return check
+
+
+# ----------------------------------------------------------------------------------------- answering
+def compose_recipe_config(name: str, overrides: list[str]):
+    """A recipe's hydra config (recipes/conf/<name>.yaml) with overrides, as its command line would give."""
+    from pathlib import Path
+
+    from hydra import compose, initialize_config_dir
+
+    with initialize_config_dir(config_dir=str(Path(__file__).parents[1] / "recipes" / "conf"), version_base="1.3"):
+        return compose(name, overrides=overrides)
+
+
+def load_recipe(name: str):
+    """recipes/<name>.py as a module (recipes/ is no package), to call its functions in-process."""
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    recipes = Path(__file__).parents[1] / "recipes"
+    if str(recipes) not in sys.path:
+        sys.path.append(str(recipes))          # as when run as a script (evaluate.py imports plot_curves)
+    spec = importlib.util.spec_from_file_location(f"recipe_{name}", recipes / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(scope="session")
+def answering_root(small_dataset_dir, tmp_path_factory):
+    """A tiny answering pipeline root: random and no-manipulation rollouts (train: 2 COUNTING questions
+    per level, 2 rollouts each of the random policy; test: 2 per level) on the small dataset, at most
+    2 pushes per episode; returns (root, the overrides that describe it)."""
+    root = tmp_path_factory.mktemp("answering")
+    overrides = [f"root={root}", f"dataset={small_dataset_dir}", "questions.max_per_group.train=2",
+                 "questions.max_per_group.test=2", "collection.repeats.train=2", "collection.workers=1",
+                 "collection.env.max_pushes=2"]
+    collect = load_recipe("collect_rollouts")
+    for system in ("random", "no_manipulation"):
+        collect.collect(compose_recipe_config("collect_rollouts", [*overrides, f"system={system}", "progress=false"]))
+    return root, overrides

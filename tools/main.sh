@@ -1,9 +1,12 @@
 #!/usr/bin/env bash
 # The main job: set up the machine if needed, then run the pipeline:
 #   1. make the default dataset unless a valid one is there, and print its summary;
-#   2. run two random-policy episodes on it and write their videos next to a printed log.
+#   2. run two random-policy episodes on it and write their videos next to a printed log;
+#   3. the whole MQA pipeline at a quick CPU scale (tools/answering_pipeline.sh): DQN(R_l) briefly,
+#      rollouts of four systems, VQA encoder pretraining, one VQA per system, Table III, videos.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 . tools/bootstrap.sh
 python recipes/make_dataset.py
 python recipes/random_episodes.py
+bash tools/answering_pipeline.sh

@@ -42,3 +42,4 @@ def make_explorer(actor: QValueActor, action_spec, *, eps_init: float, eps_end: 
     greedy = EGreedyModule(spec=action_spec.clone(), eps_init=eps_init, eps_end=eps_end,
                            annealing_num_steps=annealing_frames, action_mask_key=keys.ACTION_MASK if masked else None)
     return TensorDictSequential(actor, greedy)
+

@@ -1,0 +1,117 @@
+"""What the answering pipeline costs on this machine: CPU seconds per rollout episode of each policy
+(per level), per encoded frame, per VQA update (frozen: cached features; fine-tuned: images), per
+encoder-pretraining update, and per answered test episode. CPU time (``time.process_time``, one torch
+thread) rather than wall time, so that a busy machine gives usable figures: on 2 quiet cores with 2
+workers, wall ≈ CPU / 2.
+
+    python benchmarks/answering_costs.py --dataset data/mqa --episodes 3 --run runs/local
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import torch
+from tensordict import TensorDict
+
+from mqa_rl import keys
+from mqa_rl.collectors.rollouts import plan_questions, run_question_episode
+from mqa_rl.data import MQADataset
+from mqa_rl.data.dataset import LEVELS
+from mqa_rl.envs.sapien_bin import SapienBinEnv
+from mqa_rl.losses.encoder_pretraining import EncoderPretrainLoss
+from mqa_rl.losses.vqa import VQALoss
+from mqa_rl.modules.frozen_policies import make_frozen_policy
+from mqa_rl.modules.vqa import VQAModel, vqa_module
+from mqa_rl.modules.vqa_encoder import FrameEncoder, PretrainHeads
+
+
+def cpu(fn, repeat: int = 1) -> float:
+    """CPU seconds per call, after one warm-up call."""
+    fn()
+    t = time.process_time()
+    for _ in range(repeat):
+        fn()
+    return (time.process_time() - t) / repeat
+
+
+def rollout_costs(ds: MQADataset, specs: dict, episodes: int) -> None:
+    env = SapienBinEnv(ds, split=None)
+    env.reset()                                          # shader compile, once per process
+    print("| policy | level | CPU s / episode | pushes / episode | CPU s / push step |\n|---|---|---|---|---|")
+    for name, spec in specs.items():
+        policy, exploration = make_frozen_policy(spec, env, env.max_pushes)
+        for level in LEVELS:
+            qs = plan_questions(ds, "train", ["counting"], [level], max_per_group=episodes, seed=1)
+            pushes, t = 0, time.process_time()
+            for i, q in enumerate(qs):
+                r = run_question_episode(env, policy, exploration, q, max_pushes=env.max_pushes, slot=i)
+                pushes += int(r[keys.PUSHES])
+            sec = (time.process_time() - t) / len(qs)
+            print(f"| {name} | {level} | {sec:.2f} | {pushes / len(qs):.1f} | {sec / max(pushes / len(qs), 1):.3f} |",
+                  flush=True)
+
+
+def learning_costs(ds: MQADataset) -> None:
+    torch.manual_seed(0)
+    img = torch.randint(0, 256, (64, 3, 224, 224), dtype=torch.uint8)
+    model = VQAModel(ds.vocab.itos, ds.answers).eval()
+    with torch.no_grad():
+        encode = cpu(lambda: model.encode_frames(img)) / 64
+    print(f"encode one frame (frozen encoder, no grad): {encode * 1e3:.1f} ms CPU")
+    q = torch.tensor([list(ds.questions[0].tokens)] * 64)
+    labels = torch.zeros(64, dtype=torch.int64)
+    for pool in ("eqa", "cells", "classes"):
+        model = VQAModel(ds.vocab.itos, ds.answers, pool=pool).train()
+        feats = model.encode_frames(img).detach()
+        loss = VQALoss(vqa_module(model, from_features=True))
+        batch = TensorDict({keys.QUESTION: q, keys.FIRST_FEATURES: feats, keys.LAST_FEATURES: feats,
+                            keys.ANSWER_LABEL: labels}, batch_size=[64])
+        opt = torch.optim.Adam([p for p in model.parameters() if p.requires_grad])
+
+        def step():
+            opt.zero_grad()
+            loss(batch)["loss_vqa"].backward()
+            opt.step()
+
+        print(f"VQA update, batch 64, frozen encoder ({pool}): {cpu(step, 10) * 1e3:.0f} ms CPU")
+    model = VQAModel(ds.vocab.itos, ds.answers, freeze_encoder=False).train()
+    loss = VQALoss(vqa_module(model))
+    small = TensorDict({keys.QUESTION: q[:16], keys.FIRST_RGB: img[:16], keys.LAST_RGB: img[:16],
+                        keys.ANSWER_LABEL: labels[:16]}, batch_size=[16])
+    print(f"VQA update, batch 16, fine-tuned encoder: {cpu(lambda: loss(small)['loss_vqa'].backward(), 2):.2f} s CPU")
+    enc = FrameEncoder(num_classes=1 + len(ds.classes))
+    pre = EncoderPretrainLoss(enc, PretrainHeads(32, 1 + len(ds.classes)), camera_distance=ds.camera.distance)
+    frames = TensorDict({keys.RGB: img[:16], keys.DEPTH: torch.full((16, 1, 224, 224), 1.8),
+                         keys.CLASS_MAP: torch.zeros(16, 224, 224, dtype=torch.uint8),
+                         keys.OBJECT_MAP: torch.zeros(16, 224, 224, dtype=torch.uint8)}, batch_size=[16])
+
+    def pre_step():
+        out = pre(frames)
+        sum(v for k, v in out.items() if k.startswith("loss_")).backward()
+
+    print(f"encoder pretraining update, batch 16: {cpu(pre_step, 2):.2f} s CPU")
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--dataset", default="data/mqa")
+    p.add_argument("--episodes", type=int, default=3, help="COUNTING questions per level and policy")
+    p.add_argument("--run", default=None, help="a train_dqn.py run for the greedy DQN policy")
+    p.add_argument("--policies", default="none,random,privileged,dqn")
+    p.add_argument("--skip-rollouts", action="store_true")
+    a = p.parse_args()
+    torch.set_num_threads(1)
+    ds = MQADataset(a.dataset)
+    specs = {"none": {"kind": "none"}, "random": {"kind": "random"}, "privileged": {"kind": "privileged", "lookahead": 1}}
+    if a.run:
+        specs["dqn"] = {"kind": "dqn", "run": a.run}
+    specs = {k: v for k, v in specs.items() if k in a.policies.split(",")}
+    if not a.skip_rollouts:
+        rollout_costs(ds, specs, a.episodes)
+    learning_costs(ds)
+
+
+if __name__ == "__main__":
+    main()

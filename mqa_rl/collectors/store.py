@@ -1,0 +1,151 @@
+"""``EpisodeStore``: records (one per episode or frame) on disk as memmap TensorDict chunks,
+written atomically and resumable.
+
+Layout of a store folder::
+
+    meta.json          what is collected (dataset fingerprint, policy, plan, env); fixed at creation
+    chunk-00000/       a memmap TensorDict [N] (``TensorDict.memmap``), records keyed by ``slot``
+    chunk-00001/ ...
+    .lock              held (flock) by the one process writing
+
+Every chunk is written to a hidden ``.chunk-*.tmp-<pid>`` folder and renamed into place when
+complete, so a killed collection leaves only whole chunks (and a hidden folder, removed on the next
+open). Each record carries its ``slot`` (its position in the collection plan): an interrupted
+collection resumes by running the slots no chunk holds, so nothing is collected twice; at most one
+chunk of work in flight is redone. Opening a folder whose ``meta.json`` differs from the plan asked
+for (another policy, dataset or plan) is refused rather than mixing two collections.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import json
+import os
+import shutil
+from pathlib import Path
+
+import torch
+from tensordict import TensorDict
+
+from mqa_rl import keys
+
+META = "meta.json"
+CHUNK_PREFIX = "chunk-"
+
+
+class StoreError(ValueError):
+    """A store folder that belongs to another collection, or is incomplete or inconsistent."""
+
+
+def _comparable(meta: dict) -> dict:
+    """``meta`` without what may change between runs of the same collection (where the dataset lies)."""
+    out = json.loads(json.dumps(meta))
+    out.get("dataset", {}).pop("root", None)
+    return out
+
+
+class EpisodeStore:
+    """A store folder (see the module docstring). ``meta`` must be JSON-serialisable and include
+    ``"slots"``, the number of records the plan holds."""
+
+    def __init__(self, root: str | Path, meta: dict, *, overwrite: bool = False):
+        self.root = Path(root)
+        self.meta = json.loads(json.dumps(meta))
+        if "slots" not in self.meta:
+            raise ValueError("store meta needs 'slots' (the number of records planned)")
+        if overwrite and self.root.exists():
+            shutil.rmtree(self.root)
+        self.root.mkdir(parents=True, exist_ok=True)
+        self._lock = open(self.root / ".lock", "w")
+        try:
+            fcntl.flock(self._lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            self._lock.close()
+            raise StoreError(f"{self.root} is being written by another process; wait for it or choose another out_dir") from None
+        for leftover in self.root.glob(f".{CHUNK_PREFIX}*"):       # a killed writer's partial chunk
+            shutil.rmtree(leftover, ignore_errors=True)
+        path = self.root / META
+        if path.exists():
+            found = json.loads(path.read_text())
+            if _comparable(found) != _comparable(self.meta):
+                diff = sorted(k for k in set(found) | set(self.meta) if _comparable(found).get(k) != _comparable(self.meta).get(k))
+                raise StoreError(f"{self.root} holds another collection (differs in {diff}); choose another out_dir, "
+                                 f"or pass overwrite=true to replace it")
+        else:
+            tmp = self.root / f".{META}.tmp{os.getpid()}"
+            tmp.write_text(json.dumps(self.meta, indent=1, sort_keys=True))
+            os.replace(tmp, path)
+
+    def close(self) -> None:
+        if not self._lock.closed:
+            fcntl.flock(self._lock, fcntl.LOCK_UN)
+            self._lock.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    # ------------------------------------------------------------------------------------ write
+    def chunk_paths(self) -> list[Path]:
+        return chunk_paths(self.root)
+
+    def done_slots(self) -> set[int]:
+        done: set[int] = set()
+        for path in self.chunk_paths():
+            slots = TensorDict.load_memmap(path).get(keys.SLOT).tolist()
+            if done.intersection(slots):
+                raise StoreError(f"{path} repeats slots already stored in {self.root}: remove that chunk")
+            done.update(slots)
+        return done
+
+    def append(self, records: TensorDict) -> Path:
+        """Write ``records`` [N] (with ``slot``) as the next chunk, atomically."""
+        if records.batch_dims != 1 or keys.SLOT not in records.keys():
+            raise ValueError("records must be a TensorDict [N] holding 'slot'")
+        paths = self.chunk_paths()
+        index = int(paths[-1].name[len(CHUNK_PREFIX):]) + 1 if paths else 0
+        final = self.root / f"{CHUNK_PREFIX}{index:05d}"
+        tmp = self.root / f".{final.name}.tmp-{os.getpid()}"
+        records.memmap(prefix=str(tmp))
+        os.replace(tmp, final)
+        return final
+
+
+def chunk_paths(root: str | Path) -> list[Path]:
+    return sorted(p for p in Path(root).glob(f"{CHUNK_PREFIX}[0-9]*") if p.is_dir())
+
+
+def read_meta(root: str | Path) -> dict:
+    path = Path(root) / META
+    if not path.exists():
+        raise FileNotFoundError(f"no collection at {root} (no {META}): collect it first (recipes/collect_rollouts.py)")
+    return json.loads(path.read_text())
+
+
+def load_records(root: str | Path, select=None, *, require_complete: bool = True) -> TensorDict:
+    """All records of a store as one in-memory TensorDict [N], sorted by slot.
+
+    ``select``: the keys to read (e.g. leave the depth images on disk). ``require_complete``: raise
+    ``StoreError`` when fewer records than planned are stored (an interrupted collection)."""
+    root = Path(root)
+    meta = read_meta(root)
+    parts = []
+    for path in chunk_paths(root):
+        td = TensorDict.load_memmap(path)
+        parts.append((td.select(*select, keys.SLOT) if select is not None else td).clone())   # memmap → memory
+    if not parts:
+        if require_complete:
+            raise StoreError(f"{root} holds no records yet: run (or resume) its collection")
+        return TensorDict({}, batch_size=[0])
+    records = torch.cat(parts)
+    slots = records.get(keys.SLOT)
+    order = torch.argsort(slots)
+    records = records[order]
+    if (slots[order][1:] == slots[order][:-1]).any():
+        raise StoreError(f"{root} holds a slot twice: a chunk was copied in by hand?")
+    if require_complete and records.shape[0] < int(meta["slots"]):
+        raise StoreError(f"{root} holds {records.shape[0]} of {meta['slots']} planned records: the collection was "
+                         f"interrupted; run the same command again to finish it")
+    return records

@@ -1,0 +1,184 @@
+"""Tables and figures of the answering evaluation (``recipes/evaluate.py``): Table III (COUNTING
+accuracy per level beside the paper's), the per-type table, the policies' pushes and χ, as markdown,
+CSV and a bar chart. Every file is written atomically.
+
+``results["systems"][name]`` is either ``{"status": "missing", "reason": ..., "command": ...}`` or
+``{"status": "ok", "accuracy": {type: {level: {accuracy, low, high, n}}}, "vs_random": {level: [mean,
+half, n]}, "counter_first" / "counter_last": like accuracy, "policy": {level: {metric: [mean, half, n]}}}``;
+``results["references"]`` maps a reference's name (the answer prior) to an accuracy table.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import os
+from pathlib import Path
+
+from mqa_rl.data.dataset import LEVELS
+from mqa_rl.evaluation.paper import PAPER_BEST, PAPER_NAMES, TABLE_III
+
+
+def write_atomic(path: Path, text: str | bytes) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    tmp.write_bytes(text if isinstance(text, bytes) else text.encode())
+    os.replace(tmp, path)
+    return path
+
+
+def _acc(cell: dict | None) -> str:
+    if not cell or cell["n"] == 0:
+        return "—"
+    half = (cell["high"] - cell["low"]) / 2
+    return f"{cell['accuracy']:.3f} ± {half:.3f} (n={cell['n']})"
+
+
+def _mean(triple) -> str:
+    mean, half, n = triple
+    if n == 0 or not math.isfinite(mean):
+        return "—"
+    return f"{mean:+.3f} ± {half:.3f}" if math.isfinite(half) else f"{mean:+.3f}"
+
+
+def _label(name: str) -> str:
+    return f"{name} ({PAPER_NAMES[name]})" if name in PAPER_NAMES and name != "random" else name
+
+
+def table3_markdown(results: dict, qtype: str = "counting") -> str:
+    head = ("| system | " + " | ".join(LEVELS) + " | paper: " + " / ".join(LEVELS)
+            + " | − random (paired by question): " + " / ".join(LEVELS) + " |")
+    lines = [head, "|---|" + "---|" * (len(LEVELS) + 2)]
+    for name, res in results["systems"].items():
+        paper = " / ".join(f"{TABLE_III[name][lv]:.3f}" for lv in LEVELS) if name in TABLE_III else "—"
+        if res["status"] != "ok":
+            lines.append(f"| {_label(name)} | " + " | ".join(["missing"] * len(LEVELS)) + f" | {paper} | {res['reason']} |")
+            continue
+        cells = [_acc(res["accuracy"].get(qtype, {}).get(lv)) for lv in LEVELS]
+        vs = " / ".join(_mean(res["vs_random"][lv]) for lv in LEVELS) if res.get("vs_random") else "—"
+        lines.append(f"| {_label(name)} | " + " | ".join(cells) + f" | {paper} | {vs} |")
+    for name, table in results.get("references", {}).items():
+        cells = [_acc(table.get(qtype, {}).get(lv)) for lv in LEVELS]
+        lines.append(f"| *{name}* | " + " | ".join(cells) + " | — | — |")
+    return "\n".join(lines)
+
+
+def verdict(results: dict, qtype: str = "counting") -> list[str]:
+    """The issue's goals, checked level by level on the measured table (missing systems say so)."""
+    ok = {n: r for n, r in results["systems"].items() if r["status"] == "ok"}
+    dqn = [n for n in ("dqn_global", "dqn_local", "dqn_global_local") if n in ok]
+    out = []
+    if not dqn:
+        return ["no DQN system evaluated yet: the goals (every DQN variant beats random, the best beats the paper's "
+                "best) cannot be checked"]
+    for lv in LEVELS:
+        acc = {n: ok[n]["accuracy"].get(qtype, {}).get(lv, {}).get("accuracy", math.nan) for n in dqn}
+        best = max(acc, key=lambda n: acc[n])
+        beats_paper = acc[best] > PAPER_BEST[lv]
+        text = (f"{lv}: best DQN {best} {acc[best]:.3f} {'>' if beats_paper else '<='} the paper's best "
+                f"{PAPER_BEST[lv]:.3f}")
+        if "random" in ok:
+            worse = [n for n in dqn if not ok[n]["vs_random"][lv][0] > 0]
+            text += "; every DQN variant above random" if not worse else f"; not above random: {', '.join(worse)}"
+        out.append(text)
+    return out
+
+
+def per_type_markdown(results: dict) -> str:
+    lines = ["| system | type | " + " | ".join(LEVELS) + " | all |", "|---|---|" + "---|" * (len(LEVELS) + 1)]
+    rows = [(n, r["accuracy"]) for n, r in results["systems"].items() if r["status"] == "ok"]
+    rows += [(f"*{n}*", t) for n, t in results.get("references", {}).items()]
+    for name, table in rows:
+        for qtype, cells in table.items():
+            lines.append(f"| {name} | {qtype} | " + " | ".join(_acc(cells.get(lv)) for lv in (*LEVELS, "all")) + " |")
+    return "\n".join(lines)
+
+
+def policy_markdown(results: dict) -> str:
+    cols = ("pushes", "stopped", "chi_end", "chi_change")
+    lines = ["| system | level | pushes | stopped | targets' χ at the end | χ end − start | perfect counter (≥ 20 px) "
+             "on I_start | on I_stop |", "|---|---|" + "---|" * 6]
+    for name, res in results["systems"].items():
+        if res["status"] != "ok":
+            continue
+        for lv in (*LEVELS, "all"):
+            stats = res["policy"].get(lv)
+            if stats is None:
+                continue
+            counters = [_acc(res[c].get("counting", {}).get(lv)) for c in ("counter_first", "counter_last")]
+            lines.append(f"| {name} | {lv} | " + " | ".join(_mean(stats[c]) for c in cols) + " | " + " | ".join(counters) + " |")
+    return "\n".join(lines)
+
+
+def rows_csv(results: dict) -> str:
+    """One row per system × type × level: accuracy and interval, paper's value, pushes, χ, counters."""
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(["system", "status", "type", "level", "accuracy", "low", "high", "n", "paper", "vs_random", "vs_random_ci95",
+                "pushes", "chi_end", "chi_change", "counter_first", "counter_last"])
+    for name, res in results["systems"].items():
+        if res["status"] != "ok":
+            for lv in LEVELS:
+                w.writerow([name, "missing", "counting", lv, "", "", "", 0, TABLE_III.get(name, {}).get(lv, "")] + [""] * 7)
+            continue
+        for qtype, cells in res["accuracy"].items():
+            for lv, c in cells.items():
+                vs = res["vs_random"].get(lv, ("", "", 0)) if res.get("vs_random") and qtype == "counting" else ("", "", 0)
+                pol = res["policy"].get(lv, {})
+                cf = res["counter_first"].get(qtype, {}).get(lv, {}).get("accuracy", "")
+                cl = res["counter_last"].get(qtype, {}).get(lv, {}).get("accuracy", "")
+                paper = TABLE_III.get(name, {}).get(lv, "") if qtype == "counting" else ""
+                w.writerow([name, "ok", qtype, lv, c["accuracy"], c["low"], c["high"], c["n"], paper, vs[0], vs[1],
+                            pol.get("pushes", ("",))[0], pol.get("chi_end", ("",))[0], pol.get("chi_change", ("",))[0], cf, cl])
+    for name, table in results.get("references", {}).items():
+        for qtype, cells in table.items():
+            for lv, c in cells.items():
+                w.writerow([name, "reference", qtype, lv, c["accuracy"], c["low"], c["high"], c["n"]] + [""] * 8)
+    return buf.getvalue()
+
+
+def table3_figure(results: dict, path: Path, qtype: str = "counting") -> Path:
+    """Grouped bars (one group per level, one bar per evaluated system and the answer prior) with the
+    95 % intervals; the paper's value of the same system as a black diamond on its bar."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    bars = [(n, r["accuracy"].get(qtype, {})) for n, r in results["systems"].items() if r["status"] == "ok"]
+    bars += [(n, t.get(qtype, {})) for n, t in results.get("references", {}).items()]
+    missing = [n for n, r in results["systems"].items() if r["status"] != "ok"]
+    fig, ax = plt.subplots(figsize=(8.5, 4.2))
+    width = 0.8 / max(len(bars), 1)
+    for i, (name, cells) in enumerate(bars):
+        xs, ys, errs, paper_x, paper_y = [], [], [[], []], [], []
+        for j, lv in enumerate(LEVELS):
+            c = cells.get(lv)
+            if not c or c["n"] == 0:
+                continue
+            x = j - 0.4 + width * (i + 0.5)
+            xs.append(x)
+            ys.append(c["accuracy"])
+            errs[0].append(c["accuracy"] - c["low"])
+            errs[1].append(c["high"] - c["accuracy"])
+            if name in TABLE_III:
+                paper_x.append(x)
+                paper_y.append(TABLE_III[name][lv])
+        ax.bar(xs, ys, width * 0.95, yerr=errs, capsize=2, label=_label(name), hatch="//" if name not in results["systems"] else None)
+        if paper_x:
+            ax.plot(paper_x, paper_y, "kD", ms=5, label="paper" if "paper" not in ax.get_legend_handles_labels()[1] else None)
+    ax.set_xticks(range(len(LEVELS)), LEVELS)
+    ax.set_ylabel(f"{qtype.upper()} accuracy (95 % CI)")
+    ax.set_ylim(0, 1)
+    title = "Table III as measured" + (f" (missing: {', '.join(missing)})" if missing else "")
+    ax.set_title(title, fontsize=9)
+    ax.grid(axis="y", alpha=0.3)
+    ax.legend(fontsize=7, ncol=2)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}{path.suffix}")
+    fig.savefig(tmp, dpi=120)
+    plt.close(fig)
+    os.replace(tmp, path)
+    return path

@@ -1,0 +1,115 @@
+"""The manipulation policies whose episodes the VQA answers from, built from a small spec (a config
+mapping), frozen: nothing here learns.
+
+    {kind: random}                          the paper's baseline: random pushes, random number of them
+    {kind: random_masked}                   the same, pushes only inside the action mask
+    {kind: none}                            "no manipulation": stop at once (I_stop = I_start)
+    {kind: dqn, run: runs/local}            a train_dqn.py run, greedy (newest checkpoint, or checkpoint=...);
+                                            epsilon > 0 makes it ε-greedy (rollouts of a question then differ)
+    {kind: privileged, lookahead: 1}        the oracle reference (reads the simulator; see privileged_policy)
+
+``make_frozen_policy(spec, env)`` returns ``(policy, exploration_type)``: ``policy(td)`` writes
+``action``; run it under ``set_exploration_type(exploration_type)``. ``is_deterministic(spec)``:
+whether every rollout of a question is the same (the env replays bit-identically), in which case a
+collection needs one rollout per question.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+import torch
+from tensordict import TensorDictBase
+from tensordict.nn import TensorDictModuleBase
+from torchrl.checkpoint import CheckpointRotation
+from torchrl.envs.utils import ExplorationType
+
+from mqa_rl import keys
+from mqa_rl.envs import actions
+from mqa_rl.modules.privileged_policy import PrivilegedPushPolicy
+from mqa_rl.modules.push_policy import make_explorer
+from mqa_rl.modules.trained_policy import load_greedy
+from mqa_rl.modules.random_policy import RandomMQAPolicy
+
+KINDS = ("random", "random_masked", "none", "dqn", "privileged")
+PRIVILEGED_OPTIONS = ("min_visible_px", "min_visible_fraction", "max_tries_per_occluder", "lookahead")
+
+
+class StopPolicy(TensorDictModuleBase):
+    """"No manipulation": stop at the first step, so the last image is the first."""
+
+    in_keys: list = []
+    out_keys = [keys.ACTION]
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        tensordict.set(keys.ACTION, torch.full(tensordict.batch_size, actions.STOP, dtype=torch.int64))
+        return tensordict
+
+
+def check_spec(spec: Mapping) -> dict:
+    """The spec as a plain dict, checked: a known kind, a run folder with a checkpoint for ``dqn``."""
+    spec = dict(spec)
+    kind = spec.get("kind")
+    if kind not in KINDS:
+        raise ValueError(f"policy kind {kind!r}; choose one of {KINDS}")
+    if kind == "dqn":
+        if not spec.get("run"):
+            raise ValueError("a dqn policy needs run=<a recipes/train_dqn.py output folder>")
+        if not 0.0 <= float(spec.get("epsilon", 0.0)) <= 1.0:
+            raise ValueError(f"dqn epsilon={spec['epsilon']} must lie in [0, 1]")
+    unknown = set(spec) - {"kind", "run", "checkpoint", "epsilon", *PRIVILEGED_OPTIONS}
+    if unknown:
+        raise ValueError(f"unknown policy option(s) {sorted(unknown)} for kind {kind!r}")
+    return spec
+
+
+def resolve_checkpoint(spec: Mapping) -> dict:
+    """For ``dqn``: the spec with ``checkpoint`` set to the newest one of the run (so that a collection
+    records which weights it used, and a run trained further later is not mixed in). FileNotFoundError
+    when the run has none yet."""
+    spec = check_spec(spec)
+    if spec["kind"] != "dqn" or spec.get("checkpoint"):
+        return spec
+    run = Path(spec["run"])
+    if not (run / "config.yaml").exists():
+        raise FileNotFoundError(f"{run / 'config.yaml'} not found: train the policy first "
+                                f"(python recipes/train_dqn.py out_dir={run} reward=...)")
+    rotation = CheckpointRotation(run / "checkpoints", keep_last=1)
+    latest = rotation.latest() if rotation.directory.exists() else None
+    if latest is None:
+        raise FileNotFoundError(f"no checkpoint in {run / 'checkpoints'}: train the policy first")
+    return {**spec, "checkpoint": str(latest)}
+
+
+def is_deterministic(spec: Mapping) -> bool:
+    kind = spec["kind"]
+    return kind in ("none", "privileged") or (kind == "dqn" and float(spec.get("epsilon", 0.0)) == 0.0)
+
+
+def make_frozen_policy(spec: Mapping, env, max_pushes: int):
+    """(policy, exploration type) for ``env`` (a ``SapienBinEnv``; the privileged policy reads it)."""
+    spec = check_spec(spec)
+    kind = spec["kind"]
+    if kind in ("random", "random_masked"):
+        # no seed: draws from the global torch RNG, which the collector seeds per episode
+        return RandomMQAPolicy(max_pushes, masked=kind == "random_masked"), ExplorationType.RANDOM
+    if kind == "none":
+        return StopPolicy(), ExplorationType.DETERMINISTIC
+    if kind == "privileged":
+        options = {k: spec[k] for k in PRIVILEGED_OPTIONS if k in spec}
+        return PrivilegedPushPolicy(env, **options), ExplorationType.DETERMINISTIC
+    actor, run_cfg, _ = load_greedy(Path(spec["run"]), spec.get("checkpoint"), env)
+    eps = float(spec.get("epsilon", 0.0))
+    if eps == 0.0:
+        return actor, ExplorationType.DETERMINISTIC
+    explorer = make_explorer(actor, env.action_spec, eps_init=eps, eps_end=eps, annealing_frames=1,
+                             masked=bool(run_cfg.action_mask))
+    return explorer, ExplorationType.RANDOM
+
+
+def system_spec(systems: Mapping, name: str) -> dict:
+    """The policy spec of system ``name`` in a ``systems`` mapping (recipes/conf/answering/default.yaml)."""
+    if name not in systems:
+        raise ValueError(f"unknown system {name!r}; the config defines {sorted(systems)} (add one under systems:)")
+    return check_spec(systems[name])

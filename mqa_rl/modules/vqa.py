@@ -1,0 +1,320 @@
+"""The answering model: EmbodiedQA's ``VqaLstmCnnAttentionModel`` over two frames, I_start and I_stop.
+
+    I_start, I_stop → FrameEncoder (EQA's CNN, 32×10×10) → frame vector v_t (64)
+    question tokens → embedding → 2-layer LSTM (64) → q (64)
+    attention  a_t = softmax_t( linear_128→1( tanh([ques_tr(q), img_tr(v_t)]) ) )   over the 2 frames
+    fused      q ⊙ Σ_t a_t v_t  → MLP 64 → 64 → answers (the dataset's answer vocabulary)
+
+Frame vector (``pool``):
+
+* ``"eqa"`` (the paper's): flatten the 32×10×10 map, linear 3200 → 64, ReLU, dropout.
+* ``"cells"`` (ours, for counting): every one of the 10×10 cells gets a 64-d vector (1×1 conv); the
+  question gives ``heads`` query vectors that score each cell (sigmoid: how much of "a can" is
+  here); the frame vector is made from the score-weighted mean of the cells and the scores' sums
+  (a soft area of what the question asks about, which grows with the count) through a linear
+  layer. EQA's global linear layer must fold "how many of each of 20 classes" into 64 numbers
+  before it knows the question; here the question picks what to pool.
+* ``"classes"`` (ours, for counting): the encoder's ``class_head`` and ``density_head`` (supervised in
+  pretraining with each cell's class areas and each visible object's centre) give class
+  probabilities and per-class object densities on the third block's 24 × 24 map (the 10 × 10
+  bottleneck is too coarse to count); the question picks classes (``heads`` softmaxes over them,
+  e.g. A and B for LOGIC), which gives a map of how much of the asked class each cell holds and
+  where its objects are; small convs on those maps, their means and maxima, and the maps' sums (the
+  second: a count of the visible objects of the asked class) → 64. The question-to-class choice
+  and how visible counts relate to answers is what must be learnt from answers, not what a can
+  looks like. What the frozen encoder computes (``encode_frames``, cached in training) is then
+  [2·21, 24, 24] instead of the bottleneck [32, 10, 10].
+
+Public contract (the web demo and ``recipes/evaluate.py`` use only this)::
+
+    from mqa_rl.modules.vqa import load_vqa
+    model = load_vqa("runs/answering/vqa/counting-eqa/random")     # or the vqa.pt file itself
+    probs = model.answer_probs(tokens, first_rgb, last_rgb)         # LongTensor [B, L], uint8 [B, H, W, 3] ×2
+    model.answers[probs.argmax(-1)[0]]                              # e.g. "2"
+    tokens = model.tokenize(["How many cans are there in the bin?"])
+
+``load_vqa`` raises ``FileNotFoundError`` (no checkpoint) or ``ValueError`` (unreadable, not a VQA
+checkpoint, weights that do not fit), each saying what to do; ``tokenize`` and ``answer_probs``
+raise ``ValueError`` for a word or token outside the model's vocabulary.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import torch
+import torch.nn.functional as F
+from tensordict.nn import TensorDictModule
+from torch import nn
+
+from mqa_rl import keys
+from mqa_rl.data.vocab import PAD, UNK, words
+from mqa_rl.modules.push_qnet import QuestionEncoder
+from mqa_rl.modules.vqa_encoder import FrameEncoder, standardise
+
+VQA_FORMAT = "mqa_rl.vqa"
+VQA_VERSION = 1
+CHECKPOINT_NAME = "vqa.pt"          # what recipes/train_vqa.py writes into its out_dir
+POOLS = ("eqa", "cells", "classes")
+TRAIN_HINT = "train one with `python recipes/train_vqa.py system=<name>` (it writes <out_dir>/vqa.pt)"
+
+
+class QuestionCellPool(nn.Module):
+    """Question-conditioned pooling of the encoder's cells (``pool="cells"``): [N, C, h, w], q [N, D] → [N, D].
+
+    Scores start low (bias −2: a cell must earn its weight); sums are scaled by 1/√cells and
+    layer-normalised, which made a toy counting batch (white squares) fit 2-3× faster than plain means."""
+
+    def __init__(self, in_channels: int, dim: int, heads: int, dropout: float):
+        super().__init__()
+        self.heads = heads
+        self.cell = nn.Sequential(nn.Conv2d(in_channels, dim, 1), nn.ReLU(inplace=True))
+        self.query = nn.Linear(dim, heads * dim)
+        self.bias = nn.Parameter(torch.full((heads,), -2.0))
+        self.norm = nn.LayerNorm(heads * (dim + 1))
+        self.out = nn.Sequential(nn.Linear(heads * (dim + 1), dim), nn.ReLU(inplace=True), nn.Dropout(dropout))
+
+    def forward(self, feat: torch.Tensor, q: torch.Tensor) -> torch.Tensor:
+        cells = self.cell(feat).flatten(2).transpose(1, 2)                       # [N, hw, D]
+        n, hw, dim = cells.shape
+        queries = self.query(q).view(n, self.heads, dim)                         # [N, H, D]
+        score = torch.sigmoid(queries @ cells.transpose(1, 2) / math.sqrt(dim) + self.bias[:, None])   # [N, H, hw]
+        pooled = (score @ cells) / math.sqrt(hw)                                 # [N, H, D]
+        area = score.sum(-1, keepdim=True) / math.sqrt(hw)                       # [N, H, 1] soft area of the matches
+        return self.out(self.norm(torch.cat([pooled, area], -1).flatten(1)))
+
+
+class QuestionClassPool(nn.Module):
+    """Question-selected class maps (``pool="classes"``): [N, 2K, h, w] (class log-probabilities, then
+    per-class object densities; ``FrameEncoder.class_maps``), q [N, D] → [N, D]."""
+
+    def __init__(self, num_classes: int, dim: int, heads: int, dropout: float, width: int = 16):
+        super().__init__()
+        self.select = nn.Linear(dim, heads * num_classes)
+        self.heads = heads
+        self.conv = nn.Sequential(nn.Conv2d(2 * heads, width, 3, padding=1), nn.ReLU(inplace=True),
+                                  nn.Conv2d(width, width, 3, padding=1), nn.ReLU(inplace=True))
+        self.norm = nn.LayerNorm(2 * width + 2 * heads)
+        self.out = nn.Sequential(nn.Linear(2 * width + 2 * heads, dim), nn.ReLU(inplace=True), nn.Dropout(dropout))
+
+    def forward(self, maps: torch.Tensor, q: torch.Tensor) -> torch.Tensor:
+        maps = maps.float()
+        k = maps.shape[1] // 2
+        probs, density = maps[:, :k].exp(), maps[:, k:]                           # [N, K, h, w] each
+        n = maps.shape[0]
+        choice = F.softmax(self.select(q).view(n, self.heads, k), dim=-1)        # [N, H, K]
+        area = torch.einsum("nhk,nkyx->nhyx", choice, probs)                     # share of the asked class per cell
+        objects = torch.einsum("nhk,nkyx->nhyx", choice, density)                # its objects' centres
+        both = torch.cat([area, objects], 1)
+        c = self.conv(both)
+        sums = both.flatten(2).sum(-1)                                           # [N, 2H]: area (cells), visible count
+        return self.out(self.norm(torch.cat([c.flatten(2).mean(-1), c.flatten(2).amax(-1), sums], -1)))
+
+
+class VQAModel(nn.Module):
+    """Two-frame VQA (see the module docstring). Build with ``VQAModel(vocab, answers, **config)``."""
+
+    def __init__(self, vocab, answers, *, image_size: int = 224, encoder_channels=(8, 16, 32, 32), encoder_classes: int = 21,
+                 pool: str = "eqa", dim: int = 64, lstm_layers: int = 2, dropout: float = 0.5, cell_heads: int = 4,
+                 freeze_encoder: bool = True):
+        super().__init__()
+        self.vocab = list(vocab)
+        self.answers = list(answers)
+        if self.vocab[:2] != [PAD, UNK]:
+            raise ValueError(f"a question vocabulary starts with {PAD!r}, {UNK!r}; got {self.vocab[:2]}")
+        if pool not in POOLS:
+            raise ValueError(f"vqa pool={pool!r}; choose one of {POOLS}")
+        self.config = {"image_size": int(image_size), "encoder_channels": list(encoder_channels),
+                       "encoder_classes": int(encoder_classes), "pool": pool,
+                       "dim": int(dim), "lstm_layers": int(lstm_layers), "dropout": float(dropout),
+                       "cell_heads": int(cell_heads), "freeze_encoder": bool(freeze_encoder)}
+        self._stoi = {w: i for i, w in enumerate(self.vocab)}
+        self.encoder = FrameEncoder(tuple(encoder_channels), image_size, encoder_classes)
+        c, h, w = self.encoder.out_shape
+        self.pool = pool
+        if pool == "eqa":
+            self.image_fc = nn.Sequential(nn.Linear(c * h * w, dim), nn.ReLU(inplace=True), nn.Dropout(dropout))
+        elif pool == "cells":
+            self.image_fc = QuestionCellPool(c, dim, cell_heads, dropout)
+        else:
+            self.image_fc = QuestionClassPool(encoder_classes, dim, cell_heads, dropout)
+        self.question = QuestionEncoder(len(self.vocab), embed=dim, hidden=dim, layers=lstm_layers, out=dim)
+        self.img_tr = nn.Sequential(nn.Linear(dim, dim), nn.Dropout(dropout))
+        self.ques_tr = nn.Sequential(nn.Linear(dim, dim), nn.Dropout(dropout))
+        self.att = nn.Sequential(nn.Tanh(), nn.Dropout(dropout), nn.Linear(2 * dim, 1))
+        self.classifier = nn.Sequential(nn.Linear(dim, dim), nn.ReLU(inplace=True), nn.Dropout(dropout),
+                                        nn.Linear(dim, len(self.answers)))
+        self.set_encoder_frozen(freeze_encoder)
+
+    # ------------------------------------------------------------------------------------ training
+    def set_encoder_frozen(self, frozen: bool) -> None:
+        """Frozen: no gradients and batch-norm statistics fixed (the encoder stays in eval mode)."""
+        self.config["freeze_encoder"] = bool(frozen)
+        for p in self.encoder.parameters():
+            p.requires_grad_(not frozen)
+        self.train(self.training)
+
+    def train(self, mode: bool = True):
+        super().train(mode)
+        if self.config["freeze_encoder"]:
+            self.encoder.eval()
+        return self
+
+    # ------------------------------------------------------------------------------------ forward
+    def encode_frames(self, rgb: torch.Tensor) -> torch.Tensor:
+        """uint8 rgb [..., 3, H, W] → what the image part of the model reads (and a frozen encoder's cache
+        holds): the bottleneck [..., 32, 10, 10], or for ``pool="classes"`` the class log-probabilities
+        and object densities [..., 2K, 24, 24]."""
+        if self.pool != "classes":
+            return self.encoder.encode(rgb)
+        batch = rgb.shape[:-3]
+        out = self.encoder.class_maps(standardise(rgb.reshape(-1, *rgb.shape[-3:]), self.encoder.image_size))
+        return out.reshape(*batch, *out.shape[1:])
+
+    def forward_features(self, question: torch.Tensor, first: torch.Tensor, last: torch.Tensor):
+        """(logits [B, A], attention [B, 2]) from tokens [B, L] and encoder features [B, C, h, w] of both frames."""
+        q = self.question(question)                                              # [B, D]
+        frames = torch.stack([first, last], 1)                                   # [B, 2, C, h, w]
+        b, t = frames.shape[:2]
+        flat = frames.flatten(0, 1)
+        if self.pool == "eqa":
+            v = self.image_fc(flat.flatten(1))
+        else:
+            v = self.image_fc(flat, q.repeat_interleave(t, 0))
+        v = v.view(b, t, -1)                                                     # [B, 2, D]
+        joint = torch.cat([self.ques_tr(q).unsqueeze(1).expand(-1, t, -1), self.img_tr(v)], -1)
+        attention = F.softmax(self.att(joint).squeeze(-1), dim=1)                # [B, 2]
+        attended = (attention.unsqueeze(-1) * v).sum(1)
+        return self.classifier(q * attended), attention
+
+    def forward(self, question: torch.Tensor, first_rgb: torch.Tensor, last_rgb: torch.Tensor):
+        """(logits [B, A], attention [B, 2]) from tokens [B, L] and uint8 images [B, 3, H, W]."""
+        return self.forward_features(question, self.encode_frames(first_rgb), self.encode_frames(last_rgb))
+
+    # ------------------------------------------------------------------------------------ public
+    def tokenize(self, texts) -> torch.Tensor:
+        """Question texts → LongTensor [B, L] (0-padded). An unknown word raises ``ValueError``."""
+        rows = []
+        for text in ([texts] if isinstance(texts, str) else list(texts)):
+            ids = []
+            for word in words(text):
+                if word not in self._stoi or self._stoi[word] < 2:
+                    known = ", ".join(self.vocab[2:12])
+                    raise ValueError(f"unknown question word {word!r} in {text!r}: this VQA knows the "
+                                     f"{len(self.vocab) - 2} words of its dataset's questions ({known}, ...); ask "
+                                     f"with the dataset's templates, e.g. 'How many cans are there in the bin?'")
+                ids.append(self._stoi[word])
+            if not ids:
+                raise ValueError(f"question {text!r} has no words")
+            rows.append(torch.tensor(ids, dtype=torch.int64))
+        return nn.utils.rnn.pad_sequence(rows, batch_first=True, padding_value=0)
+
+    def check_tokens(self, tokens: torch.Tensor) -> None:
+        """``ValueError`` unless tokens are int64 [B, L] ids of known words (0 = padding, ≥ 1 word per row)."""
+        if not isinstance(tokens, torch.Tensor) or tokens.dtype != torch.int64 or tokens.dim() != 2:
+            raise ValueError(f"question tokens must be a LongTensor [B, L]; got "
+                             f"{getattr(tokens, 'dtype', type(tokens))} {tuple(getattr(tokens, 'shape', ()))}")
+        if tokens.numel() and (int(tokens.min()) < 0 or int(tokens.max()) >= len(self.vocab)):
+            raise ValueError(f"question token ids must lie in [0, {len(self.vocab)}) (this VQA's vocabulary); got "
+                             f"{int(tokens.min())}…{int(tokens.max())}: were they made with another dataset's vocabulary? "
+                             f"Use model.tokenize(texts)")
+        if (tokens == 1).any():
+            raise ValueError(f"the question holds an unknown word (token 1 = {UNK!r}); this VQA cannot answer it. "
+                             f"Use model.tokenize(texts) to see which word")
+        if ((tokens != 0).sum(-1) == 0).any():
+            raise ValueError("a question row holds only padding (token 0)")
+
+    def answer_probs(self, question_tokens: torch.Tensor, first_rgb: torch.Tensor, last_rgb: torch.Tensor) -> torch.Tensor:
+        """P(answer) [B, len(answers)] from tokens LongTensor [B, L] and uint8 images [B, H, W, 3] (I_start, I_stop).
+
+        Images of another size are resized to the model's (224 px). Runs in eval mode, without gradients."""
+        self.check_tokens(question_tokens)
+        b = question_tokens.shape[0]
+        for name, img in (("first_rgb", first_rgb), ("last_rgb", last_rgb)):
+            if (not isinstance(img, torch.Tensor) or img.dtype != torch.uint8 or img.dim() != 4 or img.shape[0] != b
+                    or img.shape[-1] != 3):
+                raise ValueError(f"{name} must be a uint8 tensor [B={b}, H, W, 3]; got "
+                                 f"{getattr(img, 'dtype', type(img))} {tuple(getattr(img, 'shape', ()))}")
+        device = next(self.parameters()).device
+        was_training = self.training
+        self.eval()
+        try:
+            with torch.no_grad():
+                logits, _ = self(question_tokens.to(device), first_rgb.permute(0, 3, 1, 2).to(device),
+                                 last_rgb.permute(0, 3, 1, 2).to(device))
+        finally:
+            self.train(was_training)
+        return F.softmax(logits.float(), -1).cpu()
+
+    def check_dataset(self, dataset) -> None:
+        """``ValueError`` unless ``dataset`` (an ``MQADataset``) tokenises questions and names answers as this model."""
+        if list(dataset.vocab.itos) != self.vocab or list(dataset.answers) != self.answers:
+            raise ValueError(f"this VQA was trained with another question or answer vocabulary than {dataset.root}'s "
+                             f"({len(self.vocab)} vs {len(dataset.vocab)} words, answers {self.answers} vs "
+                             f"{list(dataset.answers)}): retrain it on this dataset's rollouts")
+
+
+class _FromFeatures(nn.Module):
+    def __init__(self, model: VQAModel):
+        super().__init__()
+        self.model = model
+
+    def forward(self, question, first, last):
+        return self.model.forward_features(question, first, last)
+
+
+def vqa_module(model: VQAModel, *, from_features: bool = False) -> TensorDictModule:
+    """The VQA as a TensorDict module: reads the question and both frames' rgb (or, with
+    ``from_features``, the frozen encoder's cached features), writes answer logits and frame attention."""
+    if from_features:
+        return TensorDictModule(_FromFeatures(model), in_keys=[keys.QUESTION, keys.FIRST_FEATURES, keys.LAST_FEATURES],
+                                out_keys=[keys.ANSWER_LOGITS, keys.FRAME_ATTENTION])
+    return TensorDictModule(model, in_keys=[keys.QUESTION, keys.FIRST_RGB, keys.LAST_RGB],
+                            out_keys=[keys.ANSWER_LOGITS, keys.FRAME_ATTENTION])
+
+
+# ----------------------------------------------------------------------------------------- files
+def save_vqa(model: VQAModel, path: str | Path, meta: dict | None = None) -> Path:
+    """Write a self-describing VQA checkpoint (config, vocabularies, weights, ``meta``) atomically."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    blob = {"format": VQA_FORMAT, "version": VQA_VERSION, "config": dict(model.config), "vocab": list(model.vocab),
+            "answers": list(model.answers), "state_dict": {k: v.detach().cpu() for k, v in model.state_dict().items()},
+            "meta": dict(meta or {})}
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    torch.save(blob, tmp)
+    os.replace(tmp, path)
+    return path
+
+
+def load_vqa(path: str | Path, map_location: str | torch.device = "cpu") -> VQAModel:
+    """The VQA saved at ``path`` (a ``vqa.pt`` file or the train_vqa.py folder holding it), in eval mode.
+
+    ``model.meta`` holds what it was trained on. Raises ``FileNotFoundError`` when there is no
+    checkpoint, ``ValueError`` when it cannot be read, is not a VQA checkpoint or does not fit."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / CHECKPOINT_NAME
+    if not path.is_file():
+        raise FileNotFoundError(f"no VQA checkpoint at {path}: {TRAIN_HINT}")
+    try:
+        blob = torch.load(path, map_location=map_location, weights_only=True)
+    except Exception as error:
+        raise ValueError(f"{path} cannot be read as a VQA checkpoint ({type(error).__name__}: {str(error)[:200]}); it "
+                         f"may be truncated or another kind of file: {TRAIN_HINT}") from error
+    fmt = blob.get("format") if isinstance(blob, dict) else None
+    if fmt != VQA_FORMAT:
+        raise ValueError(f"{path} is not a VQA checkpoint (format {fmt!r}, expected {VQA_FORMAT!r}): {TRAIN_HINT}")
+    if int(blob.get("version", 0)) > VQA_VERSION:
+        raise ValueError(f"{path} has VQA format version {blob['version']}, newer than this mqa_rl's {VQA_VERSION}: "
+                         f"update mqa_rl")
+    try:
+        model = VQAModel(blob["vocab"], blob["answers"], **blob["config"])
+        model.load_state_dict(blob["state_dict"])
+    except (KeyError, TypeError, RuntimeError, ValueError) as error:
+        raise ValueError(f"{path}: the checkpoint does not fit the VQA model ({type(error).__name__}: "
+                         f"{str(error)[:300]}); {TRAIN_HINT}") from error
+    model.meta = dict(blob.get("meta", {}))
+    return model.to(map_location).eval()

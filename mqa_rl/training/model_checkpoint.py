@@ -1,0 +1,58 @@
+"""``ModelCheckpoint``: resume state of a supervised training run (the VQA and its encoder), written
+atomically like ``TrainingCheckpoint``: ``torchrl.checkpoint.Checkpoint`` components (the network,
+the optimiser, a ``state`` dict of counters and scores, the global RNG state) staged and renamed into
+place by ``CheckpointRotation``, then the SHA-256 of every file (``IntegrityAdapter``), checked before
+anything is restored. A checkpoint that cannot be restored raises ``CheckpointCorrupt`` saying what
+to do; a missing one is simply not there (``latest()`` is None).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from torch import nn
+from torch.optim import Optimizer
+from torchrl.checkpoint import Checkpoint, CheckpointError, CheckpointRotation, GlobalRNGState
+
+from mqa_rl.training.checkpoint import INTEGRITY, CheckpointCorrupt, IntegrityAdapter
+
+
+class ModelCheckpoint:
+    def __init__(self, directory: str | Path, *, model: nn.Module, optimizer: Optimizer, state: dict,
+                 keep_last: int = 1):
+        self.directory = Path(directory)
+        self.rotation = CheckpointRotation(self.directory, keep_last=keep_last)
+        self.state = state
+        self.checkpoint = Checkpoint(model=model, optimizer=optimizer, trainer_state=state, rng=GlobalRNGState())
+        self.checkpoint.register(INTEGRITY, {}, adapter=IntegrityAdapter())
+
+    def save(self, step: int) -> Path:
+        return self.rotation.save(self.checkpoint, step=int(step))
+
+    def latest(self) -> Path | None:
+        """The newest readable checkpoint; ``CheckpointCorrupt`` if there are checkpoints but none can be
+        read (rather than silently starting afresh over a run's logs)."""
+        latest = self.rotation.latest() if self.directory.exists() else None
+        if latest is None and self.directory.exists():
+            found = sorted(p.name for p in self.directory.glob("checkpoint-*"))
+            if found:
+                raise CheckpointCorrupt(f"{self.directory} holds {found} but none can be read (no valid manifest): "
+                                        f"delete them to start afresh, or choose another out_dir")
+        return latest
+
+    def load(self, path: str | Path | None = None) -> Path:
+        """Restore every component in place from ``path`` (default: the newest checkpoint)."""
+        path = Path(path) if path is not None else self.latest()
+        if path is None:
+            raise FileNotFoundError(f"no checkpoint in {self.directory}")
+        hint = (f"delete {path} to resume from an older checkpoint in {self.directory}, or start afresh "
+                f"with resume=false and another out_dir")
+        try:
+            IntegrityAdapter.verify(path)
+            self.checkpoint.load(path, strict="error")
+        except (CheckpointError, OSError, ValueError, KeyError, RuntimeError, EOFError) as error:
+            raise CheckpointCorrupt(f"checkpoint {path} cannot be restored ({type(error).__name__}: "
+                                    f"{str(error)[:500]}); {hint}") from error
+        if "step" not in self.state:
+            raise CheckpointCorrupt(f"checkpoint {path} lacks the step counter; {hint}")
+        return path

@@ -1,0 +1,172 @@
+"""The VQA's training data, read from an ``EpisodeStore`` of rollouts.
+
+* ``load_answering_records``: the records (question, answer, type, level, scene, ...) with or without
+  the two frames' rgb.
+* ``encode_store``: with a frozen encoder, its features of both frames are computed once, chunk by
+  chunk from the memmap (the images never all sit in memory), optionally for all 8 dihedral
+  transforms of the images: the camera looks straight down on a square bin, so a rotated or
+  mirrored image is another plausible scene with the same answers (counting, existence, logic and
+  "under" are all invariant); the 70 training scenes are few, and this multiplies them by 8.
+* ``scene_split``: a validation set of whole training scenes (stratified by level), for choosing
+  the checkpoint without looking at the test split.
+* ``Batches``: random minibatches (drawn from the global torch RNG, so a resumed run continues the
+  same stream), with a random dihedral transform per sample.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import torch
+from tensordict import TensorDict
+
+from mqa_rl import keys
+from mqa_rl.collectors.store import chunk_paths, load_records, read_meta
+
+RECORD_KEYS = (keys.QUESTION, keys.ANSWER_LABEL, keys.TYPE_LABEL, keys.LEVEL, keys.SCENE, keys.QUESTION_ID,
+               keys.PUSHES, keys.STOPPED, keys.CHI_START, keys.CHI_END)
+IMAGE_KEYS = (keys.FIRST_RGB, keys.LAST_RGB)
+DIHEDRAL = 8
+
+
+def dihedral(x: torch.Tensor, k: int) -> torch.Tensor:
+    """Transform k ∈ [0, 8) of the image's last two dims: rotation by k·90° (k mod 4), mirrored when k ≥ 4."""
+    x = torch.rot90(x, k % 4, dims=(-2, -1))
+    return x.flip(-1) if k >= 4 else x
+
+
+def load_answering_records(store: str | Path, *, images: bool = True, require_complete: bool = True) -> TensorDict:
+    """Records [N] of a rollout store, sorted by slot; with ``images`` both frames' rgb (uint8)."""
+    return load_records(store, (*RECORD_KEYS, *(IMAGE_KEYS if images else ())), require_complete=require_complete)
+
+
+@torch.no_grad()
+def encode_store(store: str | Path, encode, *, transforms: int = 1, batch_size: int = 64,
+                 require_complete: bool = True, progress=None) -> TensorDict:
+    """Records [N] with ``FIRST_FEATURES`` / ``LAST_FEATURES`` [N, transforms, C, h, w] (float16) computed
+    by ``encode`` (uint8 [B, 3, H, W] → [B, C, h, w], e.g. ``VQAModel.encode_frames`` in eval mode) for
+    the first ``transforms`` dihedral transforms of each frame."""
+    records = load_answering_records(store, images=False, require_complete=require_complete)
+    order = {int(s): i for i, s in enumerate(records.get(keys.SLOT))}
+    feats = {key: None for key in IMAGE_KEYS}
+    for path in chunk_paths(store):
+        chunk = TensorDict.load_memmap(path)
+        rows = torch.tensor([order[int(s)] for s in chunk.get(keys.SLOT)])
+        for key, out_key in zip(IMAGE_KEYS, (keys.FIRST_FEATURES, keys.LAST_FEATURES)):
+            images = chunk.get(key)
+            for start in range(0, images.shape[0], batch_size):
+                block = images[start:start + batch_size].clone()
+                per_t = [encode(dihedral(block, k)).to(torch.float16) for k in range(transforms)]
+                out = torch.stack(per_t, 1)                                 # [b, T, C, h, w]
+                if feats[key] is None:
+                    feats[key] = torch.zeros(len(records), *out.shape[1:], dtype=torch.float16)
+                feats[key][rows[start:start + batch_size]] = out
+                if progress is not None:
+                    progress.update(out.shape[0])
+    if feats[IMAGE_KEYS[0]] is None:
+        raise ValueError(f"{store} holds no images")
+    records.set(keys.FIRST_FEATURES, feats[keys.FIRST_RGB])
+    records.set(keys.LAST_FEATURES, feats[keys.LAST_RGB])
+    return records
+
+
+def scene_split(records: TensorDict, val_fraction: float, seed: int = 0) -> torch.Tensor:
+    """Bool [N]: the records whose scene is held out for validation (≈ ``val_fraction`` of each level's
+    scenes, at least one where a level has two or more; none when ``val_fraction`` is 0)."""
+    val = torch.zeros(records.shape[0], dtype=torch.bool)
+    if val_fraction <= 0:
+        return val
+    scenes, levels = records.get(keys.SCENE), records.get(keys.LEVEL)
+    rng = np.random.default_rng(seed)
+    for level in levels.unique().tolist():
+        ids = sorted(scenes[levels == level].unique().tolist())
+        n = int(round(val_fraction * len(ids)))
+        n = max(n, 1) if len(ids) > 1 else 0
+        held = rng.choice(ids, size=n, replace=False).tolist() if n else []
+        val |= torch.isin(scenes, torch.tensor(held, dtype=scenes.dtype))
+    return val
+
+
+class Batches:
+    """Random minibatches of ``records`` (features or images), each sample under a random dihedral
+    transform when ``augment`` (features: one of the cached transforms)."""
+
+    def __init__(self, records: TensorDict, batch_size: int, *, augment: bool):
+        self.records = records
+        self.batch_size = int(batch_size)
+        self.augment = augment
+        self.features = keys.FIRST_FEATURES in records.keys(True)
+
+    def __len__(self) -> int:
+        return self.records.shape[0]
+
+    def sample(self) -> TensorDict:
+        idx = torch.randint(len(self), (self.batch_size,))
+        return self.take(idx, augment=self.augment)
+
+    def take(self, idx: torch.Tensor, augment: bool = False) -> TensorDict:
+        batch = self.records[idx]
+        if self.features:
+            first, last = batch.get(keys.FIRST_FEATURES), batch.get(keys.LAST_FEATURES)
+            t = torch.randint(first.shape[1], (len(idx),)) if augment else torch.zeros(len(idx), dtype=torch.int64)
+            rows = torch.arange(len(idx))
+            batch.set(keys.FIRST_FEATURES, first[rows, t].float())
+            batch.set(keys.LAST_FEATURES, last[rows, t].float())
+        elif augment:
+            k = torch.randint(DIHEDRAL, (len(idx),))
+            for key in IMAGE_KEYS:
+                images = batch.get(key).clone()
+                for t in k.unique().tolist():
+                    images[k == t] = dihedral(images[k == t], t)
+                batch.set(key, images)
+        return batch
+
+    def all(self, batch_size: int):
+        """The records in order, in batches, without augmentation (validation)."""
+        for start in range(0, len(self), batch_size):
+            yield self.take(torch.arange(start, min(start + batch_size, len(self))))
+
+
+def pretraining_frames(stores, dataset, *, max_frames: int | None = None, seed: int = 0) -> TensorDict:
+    """Frames [N] (``RGB``, ``DEPTH``, ``OBJECT_MAP``, ``CLASS_MAP``, ``SCENE``, ``LEVEL``) for pretraining the
+    encoder, from rollout stores collected with depth and object maps (``dataset``: the ``MQADataset`` they
+    were collected on, for the objects' classes): each scene's first image once (it is the same for
+    every question of the scene) and every last image after at least one push; at most ``max_frames``
+    of them, drawn with ``seed``."""
+    wanted = (keys.RGB, keys.DEPTH, keys.OBJECT_MAP)
+    picks = []                                       # (chunk path, frame, row, scene, level)
+    seen_scenes = set()
+    for store in stores:
+        meta = read_meta(store)
+        if not (meta.get("stored", {}).get("depth") and meta.get("stored", {}).get("object_map")):
+            raise ValueError(f"{store} was collected without depth or object maps (collection.store_depth / "
+                             f"store_object_map false): pretraining needs both")
+        for path in chunk_paths(store):
+            chunk = TensorDict.load_memmap(path)
+            scenes, levels = chunk.get(keys.SCENE).tolist(), chunk.get(keys.LEVEL).tolist()
+            for row, (scene, level, n) in enumerate(zip(scenes, levels, chunk.get(keys.PUSHES).tolist())):
+                if scene not in seen_scenes:
+                    seen_scenes.add(scene)
+                    picks.append((path, keys.FIRST, row, scene, level))
+                if n > 0:
+                    picks.append((path, keys.LAST, row, scene, level))
+    if not picks:
+        raise ValueError(f"no frames in {list(stores)}: collect rollouts first (recipes/collect_rollouts.py)")
+    if max_frames is not None and len(picks) > max_frames:
+        keep = np.random.default_rng(seed).choice(len(picks), size=max_frames, replace=False)
+        picks = [picks[i] for i in sorted(keep)]
+    frames, cache = [], {}
+    for path, which, row, scene, level in picks:
+        if path not in cache:
+            cache.clear()
+            cache[path] = TensorDict.load_memmap(path)
+        frame = cache[path].get(which)[row].select(*wanted).clone()
+        objects = dataset.scenes[scene].objects
+        lut = torch.zeros(256, dtype=torch.uint8)
+        lut[1:len(objects) + 1] = torch.tensor([1 + dataset.classes.index(o.class_name) for o in objects], dtype=torch.uint8)
+        frame.set(keys.CLASS_MAP, lut[frame.get(keys.OBJECT_MAP).long()])
+        frame.set(keys.SCENE, torch.tensor(scene))
+        frame.set(keys.LEVEL, torch.tensor(level))
+        frames.append(frame)
+    return torch.stack(frames)

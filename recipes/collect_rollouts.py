@@ -1,0 +1,55 @@
+"""Roll out one MQA system's frozen manipulation policy over the questions and store the episodes.
+
+    python recipes/collect_rollouts.py system=random                 # train (3 rollouts per question) + test
+    python recipes/collect_rollouts.py system=dqn_local              # greedy DQN(R_l) from runs/local
+    python recipes/collect_rollouts.py system=privileged splits=[test]
+    python recipes/collect_rollouts.py system=random questions=all_types    # all four question types
+
+Writes ``${root}/rollouts/<questions>/<system>/<split>`` (an ``EpisodeStore``: memmap chunks written
+atomically). Interrupted? Run the same command again: it collects only what is missing. Systems are
+defined in recipes/conf/answering/default.yaml; ``mqa_rl.collectors.rollouts`` says what is stored.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")      # see train_dqn.py: idle threads must not spin
+
+import signal  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import hydra  # noqa: E402
+from omegaconf import DictConfig, OmegaConf  # noqa: E402
+
+from mqa_rl.collectors.rollouts import collect_split  # noqa: E402
+from mqa_rl.modules.frozen_policies import system_spec  # noqa: E402
+
+
+def _sigterm_to_exit(signum, frame):          # finished episodes are flushed to disk on the way out
+    raise SystemExit(f"terminated by signal {signum}")
+
+
+def collect(cfg: DictConfig) -> list[dict]:
+    spec = system_spec(OmegaConf.to_container(cfg.systems, resolve=True), cfg.system)
+    if not Path(cfg.dataset).exists():
+        raise FileNotFoundError(f"dataset {cfg.dataset} does not exist: make it with recipes/make_dataset.py")
+    summaries = []
+    for split in cfg.splits:
+        summary = collect_split(Path(cfg.out_dir) / split, split, dataset=cfg.dataset, policy=spec,
+                                questions=OmegaConf.to_container(cfg.questions),
+                                collection=OmegaConf.to_container(cfg.collection), overwrite=cfg.overwrite,
+                                progress=cfg.progress)
+        print(f"{cfg.system} {split}: {summary}", flush=True)
+        summaries.append(summary)
+    return summaries
+
+
+@hydra.main(config_path="conf", config_name="collect_rollouts", version_base="1.3")
+def main(cfg: DictConfig) -> None:
+    signal.signal(signal.SIGTERM, _sigterm_to_exit)
+    collect(cfg)
+
+
+if __name__ == "__main__":
+    main()

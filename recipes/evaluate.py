@@ -1,0 +1,177 @@
+"""Table III as measured: each MQA system (its frozen policy's test rollouts answered by the VQA trained
+on its training rollouts), COUNTING accuracy per level beside the paper's, with 95 % intervals.
+
+    python recipes/evaluate.py                                  # questions=counting vqa=eqa
+    python recipes/evaluate.py vqa=cells                        # the VQAs trained with vqa=cells
+    python recipes/evaluate.py questions=all_types              # all four question types, per type and level
+    python recipes/evaluate.py 'report=[random,no_manipulation]'
+
+Per system also: accuracy per question type and level, the difference to random paired by question,
+mean pushes, the targets' χ at the end and its change, and what a perfect counter would read from the
+first and last images (is the policy or the VQA the limit?); as references, the training split's
+majority answer per type and level (what a VQA blind to the images reaches). A system whose policy
+checkpoint, VQA or rollouts do not exist is reported as missing, with the command that makes it;
+missing test rollouts of an available policy are collected first (``collect_missing``).
+
+Writes to ``out_dir``: ``table3.md`` / ``.csv`` / ``.png``, ``per_type.md``, ``policy.md``,
+``fig7_rewards.png`` (from the DQN runs' logs), ``results.json``.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")      # see train_dqn.py: idle threads must not spin
+
+import json  # noqa: E402
+import time  # noqa: E402
+import warnings  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import hydra  # noqa: E402
+import torch  # noqa: E402
+from omegaconf import DictConfig, OmegaConf  # noqa: E402
+from tensordict import TensorDict  # noqa: E402
+
+from mqa_rl import keys  # noqa: E402
+from mqa_rl.collectors.rollouts import collect_split, plan_questions, questions_sha256  # noqa: E402
+from mqa_rl.collectors.store import StoreError, load_records, read_meta  # noqa: E402
+from mqa_rl.data import MQADataset  # noqa: E402
+from mqa_rl.data.dataset import LEVELS  # noqa: E402
+from mqa_rl.data.questions import QUESTION_TYPES  # noqa: E402
+from mqa_rl.evaluation import answering as ans  # noqa: E402
+from mqa_rl.evaluation import answering_report as report  # noqa: E402
+from mqa_rl.modules.frozen_policies import resolve_checkpoint, system_spec  # noqa: E402
+from mqa_rl.modules.vqa import CHECKPOINT_NAME, load_vqa  # noqa: E402
+from mqa_rl.training.vqa_data import IMAGE_KEYS, RECORD_KEYS  # noqa: E402
+
+EVAL_KEYS = (*RECORD_KEYS, *IMAGE_KEYS, keys.EPISODE_TARGETS, (keys.FIRST, keys.FRAME_VISIBLE),
+             (keys.LAST, keys.FRAME_VISIBLE))
+
+
+def missing(reason: str, command: str) -> dict:
+    return {"status": "missing", "reason": f"{reason}; run: `{command}`", "command": command}
+
+
+def evaluate_system(cfg: DictConfig, ds: MQADataset, name: str, plan_sha: str) -> tuple[dict, TensorDict | None, torch.Tensor | None]:
+    """(result, test records, right [N]) of one system; records and right are None when it is missing."""
+    spec = system_spec(OmegaConf.to_container(cfg.systems, resolve=True), name)
+    q, v = cfg.questions.name, cfg.vqa.name
+    try:
+        spec = resolve_checkpoint(spec)
+    except FileNotFoundError:
+        return missing(f"no trained policy in {spec['run']}",
+                       f"python recipes/train_dqn.py reward=<variant> out_dir={spec['run']}"), None, None
+    store = Path(cfg.rollouts_dir) / name / "test"
+    vqa_path = Path(cfg.vqa_dir) / name / CHECKPOINT_NAME
+    train_cmd = (f"python recipes/collect_rollouts.py system={name} questions={q} && "
+                 f"python recipes/train_vqa.py system={name} questions={q} vqa={v}")
+    if not vqa_path.exists():
+        return missing(f"no VQA at {vqa_path}", train_cmd), None, None
+    t0 = time.perf_counter()
+    try:
+        records = load_records(store, EVAL_KEYS)
+    except (FileNotFoundError, StoreError) as error:
+        if not cfg.collect_missing:
+            return missing(f"no complete test rollouts ({error})", f"python recipes/collect_rollouts.py system={name} "
+                                                                   f"questions={q} 'splits=[test]'"), None, None
+        collect_split(store, "test", dataset=ds, policy=spec, questions=OmegaConf.to_container(cfg.questions),
+                      collection=OmegaConf.to_container(cfg.collection), progress=cfg.progress)
+        records = load_records(store, EVAL_KEYS)
+    collect_seconds = time.perf_counter() - t0
+    if read_meta(store)["plan"]["questions_sha256"] != plan_sha:
+        return missing(f"the test rollouts in {store} cover other questions than questions={q} asks",
+                       f"python recipes/collect_rollouts.py system={name} questions={q} 'splits=[test]' overwrite=true"), None, None
+    if read_meta(store)["policy"] != spec:
+        warnings.warn(f"{store} was collected with policy {read_meta(store)['policy']}, the config now says {spec}",
+                      stacklevel=2)
+    model = load_vqa(vqa_path)
+    model.check_dataset(ds)
+    if model.meta.get("system") not in (None, name):
+        warnings.warn(f"{vqa_path} was trained on the rollouts of {model.meta['system']!r}, not {name!r}", stacklevel=2)
+    t1 = time.perf_counter()
+    right = ans.predict(model, records, cfg.batch_size) == records.get(keys.ANSWER_LABEL)
+    counting = records.get(keys.TYPE_LABEL) == QUESTION_TYPES.index("counting")
+    sub = records[counting]
+    result = {"status": "ok", "episodes": records.shape[0], "vqa": str(vqa_path), "rollouts": str(store),
+              "policy_spec": spec, "vqa_meta": {k: model.meta.get(k) for k in ("step", "train_episodes", "val_episodes")},
+              "accuracy": ans.accuracy_table(right, records),
+              "counter_first": ans.accuracy_table(ans.counter_right(sub, ds.answers, keys.FIRST), sub),
+              "counter_last": ans.accuracy_table(ans.counter_right(sub, ds.answers, keys.LAST), sub),
+              "policy": ans.policy_stats(records),
+              "seconds": {"collect_or_load": round(collect_seconds, 1), "answer": round(time.perf_counter() - t1, 1)}}
+    return result, records, right
+
+
+def evaluate(cfg: DictConfig) -> dict:
+    ds = MQADataset(cfg.dataset)
+    names = list(cfg.report) if cfg.report else list(cfg.systems)
+    results: dict = {"questions": cfg.questions.name, "vqa": cfg.vqa.name, "systems": {}, "references": {}}
+    plan = plan_questions(ds, "test", list(cfg.questions.types), None, cfg.questions.max_per_group["test"],
+                          int(cfg.collection.seed))
+    plan_sha = questions_sha256(plan)
+    data = {}
+    for name in names:
+        res, records, right = evaluate_system(cfg, ds, name, plan_sha)
+        results["systems"][name] = res
+        if records is not None:
+            data[name] = (records, right)
+        status = "ok" if res["status"] == "ok" else res["reason"]
+        print(f"{name}: {status}", flush=True)
+    # paired differences to random, per level, on COUNTING
+    if "random" in data:
+        r_rec, r_right = data["random"]
+        r_mask = r_rec.get(keys.TYPE_LABEL) == QUESTION_TYPES.index("counting")
+        for name, (records, right) in data.items():
+            if name == "random":
+                continue
+            counting = records.get(keys.TYPE_LABEL) == QUESTION_TYPES.index("counting")
+            results["systems"][name]["vs_random"] = {
+                lv: ans.paired_difference(right, records, r_right[r_mask], r_rec[r_mask],
+                                          mask_a=counting & (records.get(keys.LEVEL) == i))
+                for i, lv in enumerate(LEVELS)}
+    # the answer prior on the test plan's questions (needs no rollout)
+    qs = [ds.questions[i] for i in plan]
+    answer_index = {a: i for i, a in enumerate(ds.answers)}
+    plan_td = TensorDict({
+        keys.TYPE_LABEL: torch.tensor([QUESTION_TYPES.index(q.type) for q in qs]),
+        keys.LEVEL: torch.tensor([LEVELS.index(ds.scene(q.scene_id).difficulty) for q in qs]),
+        keys.ANSWER_LABEL: torch.tensor([answer_index[q.answer] for q in qs])}, batch_size=[len(qs)])
+    results["references"]["answer prior (train majority per type and level)"] = ans.accuracy_table(
+        ans.prior_right(plan_td, ans.prior_answers(ds, "train")), plan_td)
+
+    out = Path(cfg.out_dir)
+    head = (f"COUNTING accuracy on the test split ({cfg.questions.name} questions, VQA {cfg.vqa.name}), ± Wilson 95 % "
+            f"half-width; paper: Table III of Deng et al. 2021")
+    t3 = report.table3_markdown(results)
+    verdict = report.verdict(results)
+    report.write_atomic(out / "table3.md", f"{head}\n\n{t3}\n\n" + "\n".join(f"- {v}" for v in verdict) + "\n")
+    report.write_atomic(out / "table3.csv", report.rows_csv(results))
+    report.table3_figure(results, out / "table3.png")
+    per_type = report.per_type_markdown(results)
+    report.write_atomic(out / "per_type.md", f"Accuracy per question type and level (± Wilson 95 %)\n\n{per_type}\n")
+    policy = report.policy_markdown(results)
+    report.write_atomic(out / "policy.md", "Policies on the test rollouts (± 95 %); perfect counter: targets with "
+                                          f">= 20 visible px counted, COUNTING only\n\n{policy}\n")
+    if cfg.fig7:
+        runs = [Path(results["systems"][n]["policy_spec"]["run"]) for n in data
+                if results["systems"][n]["policy_spec"]["kind"] == "dqn"]
+        runs = [r for r in runs if (r / "csv" / "scalars" / "train" / "reward.csv").exists()]
+        if runs:
+            import plot_curves                        # recipes/plot_curves.py, beside this script
+
+            plot_curves.plot(runs, out / "fig7_rewards.png")
+    report.write_atomic(out / "results.json", json.dumps(results, indent=1, default=float))
+    print(f"\n{head}\n\n{t3}\n")
+    print("\n".join(verdict))
+    print(f"\n{per_type}\n\n{policy}\n\nwritten to {out}")
+    return results
+
+
+@hydra.main(config_path="conf", config_name="evaluate", version_base="1.3")
+def main(cfg: DictConfig) -> None:
+    evaluate(cfg)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,180 @@
+"""Pretrain the VQA's image encoder (EQA's CNN) on our renders, as EQA did on its own: reconstruct the
+image, label every pixel with its object class (the simulator's segmentation) and predict its height
+above the bin floor (depth), all from the CNN's 32×10×10 bottleneck.
+
+    python recipes/collect_rollouts.py system=random splits=[train]    # the frames come from these rollouts
+    python recipes/pretrain_vqa_encoder.py
+    python recipes/pretrain_vqa_encoder.py resume=true                 # continue a killed run
+
+Writes ``out_dir/encoder.pt`` (the encoder with the lowest validation loss on held-out scenes; what
+recipes/train_vqa.py loads), ``checkpoints/`` (atomic, for resume=true), ``csv/`` + ``wandb/`` logs
+(losses, class accuracy on object pixels, height error), ``config.yaml``, ``summary.json``.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")      # see train_dqn.py: idle threads must not spin
+
+import json  # noqa: E402
+import random  # noqa: E402
+import signal  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import hydra  # noqa: E402
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+from omegaconf import DictConfig, OmegaConf  # noqa: E402
+from tensordict import TensorDict  # noqa: E402
+from torch import nn  # noqa: E402
+from tqdm import tqdm  # noqa: E402
+
+from mqa_rl import keys  # noqa: E402
+from mqa_rl.collectors.rollouts import dataset_fingerprint  # noqa: E402
+from mqa_rl.data import MQADataset  # noqa: E402
+from mqa_rl.losses.encoder_pretraining import EncoderPretrainLoss  # noqa: E402
+from mqa_rl.modules.vqa_encoder import FrameEncoder, PretrainHeads, save_encoder  # noqa: E402
+from mqa_rl.training.model_checkpoint import ModelCheckpoint  # noqa: E402
+from mqa_rl.training.run_logger import RunLogger, trim_scalars  # noqa: E402
+from mqa_rl.training.vqa_data import DIHEDRAL, dihedral, pretraining_frames, scene_split  # noqa: E402
+
+ENCODER_FILE = "encoder.pt"
+
+
+def _sigterm_to_exit(signum, frame):
+    raise SystemExit(f"terminated by signal {signum}")
+
+
+def augment(batch: TensorDict) -> TensorDict:
+    """The same random dihedral transform of rgb, depth and class map, per frame."""
+    k = torch.randint(DIHEDRAL, (batch.shape[0],))
+    for key in (keys.RGB, keys.DEPTH, keys.CLASS_MAP, keys.OBJECT_MAP):
+        x = batch.get(key).clone()
+        for t in k.unique().tolist():
+            x[k == t] = dihedral(x[k == t], t)
+        batch.set(key, x)
+    return batch
+
+
+@torch.no_grad()
+def validate(loss: EncoderPretrainLoss, frames: TensorDict, device, batch_size: int) -> dict[str, float]:
+    loss.eval()
+    sums: dict[str, float] = {}
+    for start in range(0, frames.shape[0], batch_size):
+        batch = frames[start:start + batch_size].to(device)
+        for k, v in loss(batch).items():
+            sums[k] = sums.get(k, 0.0) + float(v) * batch.shape[0]
+    loss.train()
+    out = {f"val/{k}": v / frames.shape[0] for k, v in sums.items()}
+    out["val/loss"] = sum(v for k, v in out.items() if k.startswith("val/loss_"))
+    return out
+
+
+def pretrain(cfg: DictConfig) -> dict:
+    t = cfg.train
+    if t.steps <= 0 or t.batch_size <= 0 or t.eval_interval <= 0 or cfg.checkpoint.interval_steps <= 0:
+        raise ValueError("train.steps, train.batch_size, train.eval_interval and checkpoint.interval_steps must be positive")
+    out = Path(cfg.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    torch.manual_seed(cfg.seed)
+    np.random.seed(cfg.seed)
+    random.seed(cfg.seed)
+    if cfg.threads:
+        torch.set_num_threads(cfg.threads)
+    device = torch.device(cfg.device)
+    ds = MQADataset(cfg.dataset)
+    t0 = time.perf_counter()
+    frames = pretraining_frames(list(cfg.frames.stores), ds, max_frames=cfg.frames.max_frames, seed=cfg.seed)
+    val_mask = scene_split(frames, cfg.frames.val_fraction, cfg.seed)
+    train_frames, val_frames = frames[~val_mask], frames[val_mask]
+    print(f"{len(train_frames)} training frames, {len(val_frames)} validation frames "
+          f"({time.perf_counter() - t0:.0f} s to read)", flush=True)
+
+    encoder = FrameEncoder(tuple(cfg.encoder.channels), cfg.encoder.image_size, num_classes=1 + len(ds.classes))
+    heads = PretrainHeads(encoder.out_shape[0], num_classes=1 + len(ds.classes), width=cfg.heads.width)
+    loss = EncoderPretrainLoss(encoder, heads, camera_distance=ds.camera.distance,
+                               weights=OmegaConf.to_container(t.weights)).to(device)
+    model = nn.ModuleDict({"encoder": encoder, "heads": heads})
+    params = list(model.parameters())
+    optim = torch.optim.Adam(params, lr=t.lr, weight_decay=t.weight_decay)
+    state = {"step": 0, "best_val": float("inf"), "best_step": -1, "train_seconds": 0.0}
+    ckpt = ModelCheckpoint(out / "checkpoints", model=model, optimizer=optim, state=state, keep_last=cfg.checkpoint.keep_last)
+    if ckpt.latest() is not None:
+        if not cfg.resume:
+            raise FileExistsError(f"{out} already holds checkpoints ({ckpt.latest().name}): pass resume=true to "
+                                  f"continue that run, or choose another out_dir")
+        path = ckpt.load()
+        dropped = trim_scalars(out / "csv", state["step"])
+        print(f"resumed from {path} at step {state['step']} ({dropped} log rows after it dropped)")
+    elif cfg.resume:
+        print(f"resume=true but no checkpoint in {ckpt.directory}: starting a new run")
+    if state["step"] >= t.steps and (out / ENCODER_FILE).exists():
+        print(f"{out} has finished its {state['step']} steps already (raise train.steps to train on)")
+        return json.loads((out / "summary.json").read_text()) if (out / "summary.json").exists() else dict(state)
+    config = OmegaConf.to_container(cfg, resolve=True)
+    if not (out / "config.yaml").exists():
+        tmp = out / f".config.yaml.tmp{os.getpid()}"
+        OmegaConf.save(OmegaConf.create(config), tmp)
+        os.replace(tmp, out / "config.yaml")
+    logger = RunLogger(out, wandb=cfg.logger.wandb, project=cfg.logger.project, exp_name="vqa_encoder", config=config)
+    meta = {"dataset_sha256": dataset_fingerprint(ds.root), "classes": list(ds.classes), "frames": len(frames),
+            "stores": list(cfg.frames.stores)}
+
+    bar = tqdm(total=t.steps, initial=state["step"], unit="step", dynamic_ncols=True, disable=not cfg.logger.progress)
+    window: dict[str, list[float]] = {}
+    try:
+        while state["step"] < t.steps:
+            t_step = time.perf_counter()
+            batch = train_frames[torch.randint(len(train_frames), (t.batch_size,))]
+            batch = (augment(batch) if t.augment else batch).to(device)
+            td = loss(batch)
+            total = sum(v for k, v in td.items() if k.startswith("loss_"))
+            optim.zero_grad()
+            total.backward()
+            torch.nn.utils.clip_grad_norm_(params, t.max_grad_norm)
+            optim.step()
+            state["step"] += 1
+            state["train_seconds"] += time.perf_counter() - t_step
+            for k, v in td.items():
+                window.setdefault(f"train/{k}", []).append(float(v.detach()))
+            bar.update(1)
+            step = state["step"]
+            if step % t.eval_interval == 0 or step == t.steps:
+                metrics = {k: float(np.mean(v)) for k, v in window.items()}
+                window = {}
+                metrics["time/steps_per_s"] = step / max(state["train_seconds"], 1e-9)
+                if len(val_frames):
+                    metrics.update(validate(loss, val_frames, device, 2 * t.batch_size))
+                    if metrics["val/loss"] < state["best_val"]:
+                        state["best_val"], state["best_step"] = metrics["val/loss"], step
+                        save_encoder(encoder, out / ENCODER_FILE, {**meta, "step": step, "val": metrics})
+                logger.log_metrics(metrics, step=step)
+                bar.set_postfix(cls=f"{metrics.get('val/class_accuracy', float('nan')):.2f}",
+                                loss=f"{metrics.get('val/loss', float('nan')):.3f}")
+            if step % cfg.checkpoint.interval_steps == 0 or step == t.steps:
+                ckpt.save(step)
+    finally:
+        bar.close()
+        logger.close()
+    if not len(val_frames):
+        save_encoder(encoder, out / ENCODER_FILE, {**meta, "step": t.steps})
+    summary = {"steps": int(t.steps), "train_frames": len(train_frames), "val_frames": len(val_frames),
+               "best_val_loss": state["best_val"] if len(val_frames) else None, "best_step": state["best_step"],
+               "train_seconds": round(state["train_seconds"], 1), "encoder": str(out / ENCODER_FILE)}
+    tmp = out / f".summary.json.tmp{os.getpid()}"
+    tmp.write_text(json.dumps(summary, indent=1))
+    os.replace(tmp, out / "summary.json")
+    print("done:", summary)
+    return summary
+
+
+@hydra.main(config_path="conf", config_name="pretrain_vqa_encoder", version_base="1.3")
+def main(cfg: DictConfig) -> None:
+    signal.signal(signal.SIGTERM, _sigterm_to_exit)
+    pretrain(cfg)
+
+
+if __name__ == "__main__":
+    main()

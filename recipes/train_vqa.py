@@ -1,0 +1,227 @@
+"""Train the two-frame VQA on one MQA system's training rollouts (the policy is frozen; only the VQA learns).
+
+    python recipes/train_vqa.py system=random                       # EQA's model (vqa=eqa), frozen encoder
+    python recipes/train_vqa.py system=dqn_local vqa=cells          # our question-conditioned cell pooling
+    python recipes/train_vqa.py system=random resume=true           # continue a killed run
+    python recipes/train_vqa.py system=random encoder.freeze=false device=cuda   # fine-tune the encoder
+
+Reads ``${root}/rollouts/<questions>/<system>/train`` (recipes/collect_rollouts.py) and the pretrained
+encoder (recipes/pretrain_vqa_encoder.py); writes to ``out_dir``: ``vqa.pt`` (the model with the best
+accuracy on held-out training scenes: what ``mqa_rl.modules.vqa.load_vqa`` and recipes/evaluate.py
+read), ``checkpoints/`` (atomic, for resume=true), ``csv/`` and ``wandb/`` logs (loss, accuracy,
+validation accuracy per level), ``config.yaml`` and ``summary.json``.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")      # see train_dqn.py: idle threads must not spin
+
+import json  # noqa: E402
+import random  # noqa: E402
+import signal  # noqa: E402
+import time  # noqa: E402
+import warnings  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import hydra  # noqa: E402
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+from omegaconf import DictConfig, OmegaConf  # noqa: E402
+from tqdm import tqdm  # noqa: E402
+
+from mqa_rl import keys  # noqa: E402
+from mqa_rl.collectors.rollouts import dataset_fingerprint  # noqa: E402
+from mqa_rl.collectors.store import read_meta  # noqa: E402
+from mqa_rl.data import MQADataset  # noqa: E402
+from mqa_rl.data.dataset import LEVELS  # noqa: E402
+from mqa_rl.losses.vqa import VQALoss  # noqa: E402
+from mqa_rl.modules.vqa import CHECKPOINT_NAME, VQAModel, save_vqa, vqa_module  # noqa: E402
+from mqa_rl.modules.vqa_encoder import load_encoder  # noqa: E402
+from mqa_rl.training.model_checkpoint import ModelCheckpoint  # noqa: E402
+from mqa_rl.training.run_logger import RunLogger, trim_scalars  # noqa: E402
+from mqa_rl.training.vqa_data import DIHEDRAL, Batches, encode_store, load_answering_records, scene_split  # noqa: E402
+
+MODEL_OPTIONS = ("pool", "image_size", "dim", "lstm_layers", "dropout", "cell_heads")
+
+
+def _sigterm_to_exit(signum, frame):
+    raise SystemExit(f"terminated by signal {signum}")
+
+
+def check_config(cfg: DictConfig) -> None:
+    t = cfg.train
+    if t.steps <= 0 or t.batch_size <= 0 or t.eval_interval <= 0 or cfg.checkpoint.interval_steps <= 0:
+        raise ValueError("train.steps, train.batch_size, train.eval_interval and checkpoint.interval_steps must be positive")
+    if not 0.0 <= t.val_fraction < 1.0:
+        raise ValueError(f"train.val_fraction={t.val_fraction} must lie in [0, 1)")
+    if not Path(cfg.dataset).exists():
+        raise FileNotFoundError(f"dataset {cfg.dataset} does not exist: make it with recipes/make_dataset.py")
+
+
+def build_model(cfg: DictConfig, ds: MQADataset) -> tuple[VQAModel, dict]:
+    """The VQA for ``ds``'s vocabularies with the pretrained encoder (if given) loaded."""
+    options = {k: cfg.vqa[k] for k in MODEL_OPTIONS}
+    model = VQAModel(ds.vocab.itos, ds.answers, freeze_encoder=bool(cfg.encoder.freeze), encoder_classes=1 + len(ds.classes),
+                     **options)
+    encoder_meta = {}
+    if cfg.encoder.weights:
+        encoder, encoder_meta = load_encoder(cfg.encoder.weights)
+        found = (encoder.image_size, encoder.channels, encoder.num_classes)
+        needed = (model.encoder.image_size, model.encoder.channels, model.encoder.num_classes)
+        if found != needed:
+            raise ValueError(f"encoder {cfg.encoder.weights} has (image size, channels, classes) {found}, the VQA "
+                             f"needs {needed}: pretrain it again for this dataset and vqa config")
+        if encoder_meta.get("dataset_sha256") not in (None, dataset_fingerprint(ds.root)):
+            warnings.warn(f"encoder {cfg.encoder.weights} was pretrained on another dataset", stacklevel=2)
+        model.encoder.load_state_dict(encoder.state_dict())
+    elif cfg.encoder.freeze:
+        warnings.warn("encoder.weights=null with encoder.freeze=true: the VQA reads a fixed random projection of the "
+                      "images; pretrain one (recipes/pretrain_vqa_encoder.py) or set encoder.freeze=false", stacklevel=2)
+    return model, encoder_meta
+
+
+@torch.no_grad()
+def validate(loss: VQALoss, batches: Batches, device, batch_size: int) -> dict[str, float]:
+    """Loss and accuracy over ``batches`` (all of it, in order), overall and per level."""
+    loss.network.eval()
+    right, levels, losses = [], [], []
+    for batch in batches.all(batch_size):
+        batch = batch.to(device)
+        td = loss.network(batch.copy())
+        logits, target = td.get(keys.ANSWER_LOGITS), batch.get(keys.ANSWER_LABEL)
+        losses.append(torch.nn.functional.cross_entropy(logits, target, reduction="sum").item())
+        right.append((logits.argmax(-1) == target).cpu())
+        levels.append(batch.get(keys.LEVEL).cpu())
+    loss.network.train()
+    right_t, level_t = torch.cat(right).float(), torch.cat(levels)
+    out = {"val/accuracy": right_t.mean().item(), "val/loss": sum(losses) / len(right_t)}
+    for i, level in enumerate(LEVELS):
+        if (level_t == i).any():
+            out[f"val/accuracy_{level}"] = right_t[level_t == i].mean().item()
+    return out
+
+
+def train(cfg: DictConfig) -> dict:
+    check_config(cfg)
+    out = Path(cfg.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    torch.manual_seed(cfg.seed)
+    np.random.seed(cfg.seed)
+    random.seed(cfg.seed)
+    if cfg.threads:
+        torch.set_num_threads(cfg.threads)
+    device = torch.device(cfg.device)
+    meta = read_meta(cfg.rollouts)
+    ds = MQADataset(cfg.dataset)
+    if meta["dataset"]["manifest_sha256"] != dataset_fingerprint(ds.root):
+        raise ValueError(f"the rollouts {cfg.rollouts} were collected on another dataset than {cfg.dataset}")
+    model, encoder_meta = build_model(cfg, ds)
+    model.to(device)
+
+    frozen = bool(cfg.encoder.freeze)
+    loss = VQALoss(vqa_module(model, from_features=frozen), label_smoothing=cfg.train.label_smoothing)
+    params = [p for p in model.parameters() if p.requires_grad]
+    optim = torch.optim.Adam(params, lr=cfg.train.lr, weight_decay=cfg.train.weight_decay)
+    state = {"step": 0, "best_val": -1.0, "best_step": -1, "train_seconds": 0.0}
+    ckpt = ModelCheckpoint(out / "checkpoints", model=model, optimizer=optim, state=state, keep_last=cfg.checkpoint.keep_last)
+    if ckpt.latest() is not None:
+        if not cfg.resume:
+            raise FileExistsError(f"{out} already holds checkpoints ({ckpt.latest().name}): pass resume=true to "
+                                  f"continue that run, or choose another out_dir")
+        path = ckpt.load()
+        dropped = trim_scalars(out / "csv", state["step"])
+        print(f"resumed from {path} at step {state['step']} ({dropped} log rows after it dropped)")
+    elif cfg.resume:
+        print(f"resume=true but no checkpoint in {ckpt.directory}: starting a new run")
+    steps = int(cfg.train.steps)
+    if state["step"] >= steps and (out / CHECKPOINT_NAME).exists():
+        print(f"{out} has finished its {state['step']} steps already (raise train.steps to train on)")
+        return json.loads((out / "summary.json").read_text()) if (out / "summary.json").exists() else dict(state)
+
+    # ---- data: cached frozen features, or images for fine-tuning
+    t0 = time.perf_counter()
+    if frozen:
+        transforms = DIHEDRAL if cfg.train.augment else 1
+        bar = tqdm(total=int(meta["slots"]) * 2, unit="frame", desc=f"encoding ×{transforms}", disable=not cfg.logger.progress)
+        model.eval()
+        records = encode_store(cfg.rollouts, lambda x: model.encode_frames(x.to(device)).cpu(), transforms=transforms,
+                               progress=bar)
+        bar.close()
+        model.train()
+    else:
+        records = load_answering_records(cfg.rollouts, images=True)
+    feature_seconds = time.perf_counter() - t0
+    val_mask = scene_split(records, cfg.train.val_fraction, cfg.seed)
+    train_set = Batches(records[~val_mask], cfg.train.batch_size, augment=bool(cfg.train.augment))
+    val_set = Batches(records[val_mask], cfg.train.batch_size, augment=False) if val_mask.any() else None
+    print(f"{cfg.system}: {len(train_set)} training episodes, {int(val_mask.sum())} validation episodes "
+          f"({'frozen encoder, features' if frozen else 'fine-tuned encoder'}: {feature_seconds:.0f} s)", flush=True)
+
+    config = OmegaConf.to_container(cfg, resolve=True)
+    if not (out / "config.yaml").exists():
+        tmp = out / f".config.yaml.tmp{os.getpid()}"
+        OmegaConf.save(OmegaConf.create(config), tmp)
+        os.replace(tmp, out / "config.yaml")
+    logger = RunLogger(out, wandb=cfg.logger.wandb, project=cfg.logger.project,
+                       exp_name=f"vqa_{cfg.vqa.name}_{cfg.system}", config=config)
+    vqa_meta = {"system": cfg.system, "questions": cfg.questions.name, "rollouts": str(cfg.rollouts),
+                "dataset_sha256": meta["dataset"]["manifest_sha256"], "policy": meta["policy"],
+                "encoder": {"weights": cfg.encoder.weights, "frozen": frozen, **encoder_meta},
+                "train_episodes": len(train_set), "val_episodes": int(val_mask.sum())}
+
+    bar = tqdm(total=steps, initial=state["step"], unit="step", dynamic_ncols=True, disable=not cfg.logger.progress)
+    window_loss, window_acc, t_start = [], [], time.perf_counter()
+    try:
+        while state["step"] < steps:
+            t_step = time.perf_counter()
+            batch = train_set.sample().to(device)
+            td = loss(batch)
+            optim.zero_grad()
+            td["loss_vqa"].backward()
+            torch.nn.utils.clip_grad_norm_(params, cfg.train.max_grad_norm)
+            optim.step()
+            state["step"] += 1
+            state["train_seconds"] += time.perf_counter() - t_step
+            window_loss.append(td["loss_vqa"].item())
+            window_acc.append(td["accuracy"].item())
+            bar.update(1)
+            step = state["step"]
+            if step % cfg.train.eval_interval == 0 or step == steps:
+                metrics = {"train/loss": float(np.mean(window_loss)), "train/accuracy": float(np.mean(window_acc)),
+                           "time/steps_per_s": len(window_loss) / max(time.perf_counter() - t_start, 1e-9)}
+                window_loss, window_acc, t_start = [], [], time.perf_counter()
+                if val_set is not None:
+                    metrics.update(validate(loss, val_set, device, 4 * cfg.train.batch_size))
+                    if metrics["val/accuracy"] > state["best_val"]:
+                        state["best_val"], state["best_step"] = metrics["val/accuracy"], step
+                        save_vqa(model, out / CHECKPOINT_NAME, {**vqa_meta, "step": step, "val": metrics})
+                logger.log_metrics(metrics, step=step)
+                bar.set_postfix(loss=f"{metrics['train/loss']:.3f}", val=f"{metrics.get('val/accuracy', float('nan')):.3f}")
+            if step % cfg.checkpoint.interval_steps == 0 or step == steps:
+                ckpt.save(step)
+    finally:
+        bar.close()
+        logger.close()
+    if val_set is None:
+        save_vqa(model, out / CHECKPOINT_NAME, {**vqa_meta, "step": steps})
+    summary = {"system": cfg.system, "steps": steps, "train_episodes": len(train_set), "val_episodes": int(val_mask.sum()),
+               "best_val_accuracy": state["best_val"] if val_set is not None else None, "best_step": state["best_step"],
+               "feature_seconds": round(feature_seconds, 1), "train_seconds": round(state["train_seconds"], 1),
+               "vqa": str(out / CHECKPOINT_NAME)}
+    tmp = out / f".summary.json.tmp{os.getpid()}"
+    tmp.write_text(json.dumps(summary, indent=1))
+    os.replace(tmp, out / "summary.json")
+    print("done:", summary)
+    return summary
+
+
+@hydra.main(config_path="conf", config_name="train_vqa", version_base="1.3")
+def main(cfg: DictConfig) -> None:
+    signal.signal(signal.SIGTERM, _sigterm_to_exit)
+    train(cfg)
+
+
+if __name__ == "__main__":
+    main()

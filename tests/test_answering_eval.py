@@ -1,0 +1,99 @@
+"""recipes/evaluate.py on a tiny pipeline: Table III beside the paper's (markdown, CSV, PNG), the
+per-type and policy tables, missing systems named with their command, test rollouts collected when
+missing, a mismatched VQA refused; and the statistics it is built from."""
+
+import csv
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+from conftest import compose_recipe_config, load_recipe
+from tensordict import TensorDict
+from torch_threads import one_torch_thread  # noqa: F401  (autouse)
+
+from mqa_rl import keys
+from mqa_rl.evaluation import answering as ans
+from mqa_rl.modules.vqa import VQAModel, save_vqa
+
+ROOT = Path(__file__).parents[1]
+
+
+def test_statistics():
+    p, lo, hi = ans.wilson(5, 10)
+    assert p == 0.5 and abs(lo - 0.2366) < 1e-3 and abs(hi - 0.7634) < 1e-3
+    assert ans.wilson(0, 4)[1] == 0.0 and all(x != x for x in ans.wilson(0, 0))
+    rec = lambda q: TensorDict({keys.QUESTION_ID: torch.tensor(q)}, batch_size=[len(q)])   # noqa: E731
+    # A right on questions 1, 2 (2 rollouts of question 2: half right), B right on question 1 only
+    mean, half, n = ans.paired_difference(torch.tensor([True, True, False]), rec([1, 2, 2]),
+                                          torch.tensor([True, False, False]), rec([1, 2, 3]))
+    assert n == 2 and mean == pytest.approx(0.25)
+    counting = TensorDict({keys.EPISODE_TARGETS: torch.tensor([[True, True, False], [True, False, False]]),
+                           (keys.LAST, keys.FRAME_VISIBLE): torch.tensor([[30.0, 5.0, 99.0], [0.0, 50.0, 50.0]]),
+                           keys.ANSWER_LABEL: torch.tensor([1, 1]), keys.TYPE_LABEL: torch.tensor([0, 0])}, batch_size=[2])
+    answers = ("0", "1", "2", "3", "yes", "no")
+    assert ans.counter_right(counting, answers).tolist() == [True, False]   # 1 target seen of 1 / none of 1
+
+
+@pytest.fixture(scope="module")
+def trained(answering_root):
+    root, overrides = answering_root
+    train_vqa = load_recipe("train_vqa")
+    for system in ("random", "no_manipulation"):
+        train_vqa.train(compose_recipe_config("train_vqa", [
+            *overrides, f"system={system}", "encoder.weights=null", "encoder.freeze=false", "train.steps=3", "train.batch_size=4",
+            "train.eval_interval=3", "logger.wandb=false", "logger.progress=false"]))
+    return root, overrides
+
+
+def test_evaluate_writes_table3_and_names_what_is_missing(small_dataset, trained, tmp_path):
+    root, overrides = trained
+    test_store = root / "rollouts" / "counting" / "no_manipulation" / "test"
+    for chunk in test_store.glob("chunk-*"):        # lost test rollouts are collected again
+        os.rename(chunk, tmp_path / chunk.name)
+    evaluate = load_recipe("evaluate")
+    results = evaluate.evaluate(compose_recipe_config("evaluate", [
+        *overrides, "progress=false", f"systems.dqn_local.run={tmp_path / 'no_run'}",
+        "report=[random,no_manipulation,dqn_local,dqn_global]"]))
+    assert list(test_store.glob("chunk-*"))
+    out = root / "report" / "counting-eqa"
+    table = (out / "table3.md").read_text()
+    assert "| random |" in table and "0.277 / 0.308 / 0.274" in table                 # the paper's beside ours
+    assert "| dqn_local (DQN(R_l)) | missing" in table and "train_dqn.py" in table
+    assert "answer prior" in table and "no DQN system evaluated yet" in table
+    sys_res = results["systems"]
+    assert sys_res["random"]["status"] == "ok" and sys_res["dqn_global"]["status"] == "missing"
+    assert set(sys_res["random"]["accuracy"]["counting"]) == {"easy", "hard", "all"}    # the test split's levels
+    n = sum(c["n"] for lv, c in sys_res["random"]["accuracy"]["counting"].items() if lv != "all")
+    assert n == sys_res["random"]["episodes"] == 4
+    assert "vs_random" in sys_res["no_manipulation"]
+    assert sys_res["no_manipulation"]["policy"]["all"]["pushes"][0] == 0.0
+    with open(out / "table3.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert {r["system"] for r in rows} >= {"random", "no_manipulation", "dqn_local"}
+    assert any(r["status"] == "missing" and r["paper"] == "0.4458" for r in rows)
+    assert (out / "table3.png").stat().st_size > 0 and "counting" in (out / "per_type.md").read_text()
+    assert "perfect counter" in (out / "policy.md").read_text()
+    assert json.loads((out / "results.json").read_text())["systems"]["random"]["episodes"] == 4
+
+
+def test_evaluate_refuses_a_vqa_of_another_vocabulary(small_dataset, trained):
+    root, overrides = trained
+    other = VQAModel(["<pad>", "<unk>", "how", "many"], small_dataset.answers)
+    save_vqa(other, root / "vqa" / "counting-eqa" / "privileged" / "vqa.pt")
+    evaluate = load_recipe("evaluate")
+    with pytest.raises(ValueError, match="another question or answer vocabulary"):
+        evaluate.evaluate(compose_recipe_config("evaluate", [*overrides, "progress=false", "report=[privileged]"]))
+
+
+def test_evaluate_from_the_command_line(trained, tmp_path):
+    root, overrides = trained
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    out = subprocess.run([sys.executable, str(ROOT / "recipes" / "evaluate.py"), *overrides, "progress=false",
+                          "collect_missing=false", "report=[random,dqn_global]", f"out_dir={tmp_path / 'report'}"],
+                         cwd=tmp_path, capture_output=True, text=True, timeout=600, env=env)
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert "| random |" in out.stdout and (tmp_path / "report" / "table3.md").exists()

@@ -1,0 +1,148 @@
+"""Rollouts of frozen policies for the VQA: what a record holds, the store's round trip, resuming an
+interrupted collection without duplicates, worker processes, the DQN-checkpoint path and the
+references (no manipulation, privileged)."""
+
+import json
+from pathlib import Path
+
+import pytest
+import torch
+from omegaconf import OmegaConf
+
+from mqa_rl import keys
+from mqa_rl.collectors import rollouts
+from mqa_rl.collectors.rollouts import collect_rollouts, plan_questions
+from mqa_rl.collectors.store import EpisodeStore, StoreError, load_records
+from mqa_rl.data.dataset import LEVELS
+from mqa_rl.modules.frozen_policies import resolve_checkpoint
+
+PLAN = dict(policy={"kind": "random"}, split="train", question_types=["counting"], max_per_group=1, repeats=2,
+            max_pushes=2, workers=1, chunk_episodes=2, progress=False)
+
+
+@pytest.fixture(scope="module")
+def random_store(small_dataset, tmp_path_factory):
+    out = tmp_path_factory.mktemp("rollouts") / "random"
+    summary = collect_rollouts(out, dataset=small_dataset, **PLAN)
+    return out, summary
+
+
+def test_records_hold_the_episode(small_dataset, random_store):
+    out, summary = random_store
+    questions = plan_questions(small_dataset, "train", ["counting"], max_per_group=1)
+    assert summary["episodes"] == 2 * len(questions) == summary["collected_now"]
+    r = load_records(out)
+    assert r.shape == (2 * len(questions),) and r[keys.SLOT].tolist() == list(range(r.shape[0]))
+    assert r[keys.REPEAT].tolist() == [0, 1] * len(questions)
+    assert r[keys.QUESTION_ID].tolist() == [q for q in questions for _ in range(2)]
+    assert r[keys.FIRST_RGB].dtype == torch.uint8 and r[keys.FIRST_RGB].shape[1:] == (3, 224, 224)
+    assert r[keys.LAST_DEPTH].dtype == torch.float16 and r[(keys.LAST, keys.OBJECT_MAP)].dtype == torch.uint8
+    assert ((r[keys.PUSHES] >= 0) & (r[keys.PUSHES] <= 2)).all()
+    for i in range(r.shape[0]):
+        q = small_dataset.questions[int(r[keys.QUESTION_ID][i])]
+        scene = small_dataset.scenes[int(r[keys.SCENE][i])]
+        assert q.scene_id == scene.id and LEVELS[int(r[keys.LEVEL][i])] == scene.difficulty
+        assert small_dataset.answers[int(r[keys.ANSWER_LABEL][i])] == q.answer
+        assert small_dataset.vocab.decode(r[keys.QUESTION][i]) == small_dataset.vocab.decode(q.tokens)
+        # the object map is the segmentation: each object's pixels = its visible area A_s
+        for frame in (keys.FIRST, keys.LAST):
+            omap, visible = r[(frame, keys.OBJECT_MAP)][i], r[(frame, keys.FRAME_VISIBLE)][i]
+            counts = torch.bincount(omap.flatten().long(), minlength=len(scene.objects) + 1)[1:]
+            assert torch.equal(counts.float(), visible[: len(scene.objects)]), frame
+        # the targets' mean χ of the first image
+        t = r[keys.EPISODE_TARGETS][i]
+        chi = r[(keys.FIRST, keys.FRAME_OVERLAP)][i][t].mean() if t.any() else torch.tensor(float("nan"))
+        assert torch.allclose(r[keys.CHI_START][i], chi, equal_nan=True)
+    # repeats of a question start from the same image (the same settled scene)
+    assert torch.equal(r[keys.FIRST_RGB][0], r[keys.FIRST_RGB][1])
+    assert json.loads((out / "collect_log.jsonl").read_text().splitlines()[-1])["episodes"] == r.shape[0]
+
+
+def test_interrupted_collection_resumes_without_duplicates(small_dataset, random_store, tmp_path, monkeypatch):
+    reference = load_records(random_store[0])
+    out = tmp_path / "resumed"
+    real, calls = rollouts.run_question_episode, []
+
+    def flaky(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 4:
+            raise KeyboardInterrupt               # Ctrl-C in the middle of the 4th episode
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(rollouts, "run_question_episode", flaky)
+    with pytest.raises(KeyboardInterrupt):
+        collect_rollouts(out, dataset=small_dataset, **{**PLAN, "chunk_episodes": 2})
+    monkeypatch.setattr(rollouts, "run_question_episode", real)
+    assert load_records(out, require_complete=False).shape[0] == 3      # finished episodes were kept
+    with pytest.raises(StoreError, match="interrupted"):
+        load_records(out)
+    (out / ".chunk-00009.tmp-1").mkdir()                                  # a killed writer's partial chunk
+    summary = collect_rollouts(out, dataset=small_dataset, **PLAN)
+    assert summary["already_there"] == 3 and summary["collected_now"] == reference.shape[0] - 3
+    assert not list(out.glob(".chunk-*"))
+    resumed = load_records(out)
+    assert resumed[keys.SLOT].tolist() == reference[keys.SLOT].tolist()  # nothing duplicated or lost
+    for key in (keys.LAST_RGB, keys.PUSHES, keys.CHI_END):                # slot-seeded: the same episodes
+        assert torch.equal(resumed[key], reference[key]), key
+    assert collect_rollouts(out, dataset=small_dataset, **PLAN)["collected_now"] == 0
+
+
+def test_store_refuses_another_plan_and_a_second_writer(small_dataset, random_store, tmp_path):
+    out, _ = random_store
+    with pytest.raises(StoreError, match="another collection.*overwrite"):
+        collect_rollouts(out, dataset=small_dataset, **{**PLAN, "repeats": 3})
+    meta = {"slots": 1, "x": 1}
+    with EpisodeStore(tmp_path / "s", meta):
+        with pytest.raises(StoreError, match="another process"):
+            EpisodeStore(tmp_path / "s", meta)
+
+
+def test_worker_processes_give_the_same_episodes(small_dataset, small_dataset_dir, random_store, tmp_path, monkeypatch):
+    monkeypatch.setattr(rollouts, "IN_PROCESS_BELOW", 0)
+    out = tmp_path / "pool"
+    summary = collect_rollouts(out, dataset=small_dataset_dir, **{**PLAN, "workers": 2})
+    assert summary["workers"] == 2
+    pooled, reference = load_records(out), load_records(random_store[0])
+    for key in (keys.SLOT, keys.LAST_RGB, keys.PUSHES):
+        assert torch.equal(pooled[key], reference[key]), key
+
+
+def _fake_dqn_run(run, env):
+    """A train_dqn.py output folder with an untrained light Q-network checkpoint."""
+    from torchrl.checkpoint import Checkpoint, CheckpointRotation
+
+    from mqa_rl.modules.push_policy import make_push_qnet, make_q_actor
+
+    model = OmegaConf.load(Path(__file__).parents[1] / "recipes" / "conf" / "trunk" / "light.yaml")
+    cfg = OmegaConf.create({"model": model, "action_mask": True})
+    run.mkdir(parents=True)
+    OmegaConf.save(cfg, run / "config.yaml")
+    net = make_push_qnet(cfg.model, vocab_size=len(env.dataset.vocab), camera_distance=env.camera.distance)
+    actor = make_q_actor(net, env.action_spec)
+    CheckpointRotation(run / "checkpoints", keep_last=1).save(Checkpoint(policy=actor), step=5)
+
+
+def test_dqn_checkpoint_and_reference_policies(small_dataset, tmp_path):
+    from mqa_rl.envs.sapien_bin import SapienBinEnv
+
+    run = tmp_path / "dqn_run"
+    with pytest.raises(FileNotFoundError, match="train the policy first"):
+        resolve_checkpoint({"kind": "dqn", "run": str(run)})
+    _fake_dqn_run(run, SapienBinEnv(small_dataset, split="train"))
+    plan = {**PLAN, "max_per_group": 2, "split": "test", "chunk_episodes": 8}
+    levels = ["hard"]
+    out = tmp_path / "dqn"
+    summary = collect_rollouts(out, dataset=small_dataset, levels=levels, **{**plan, "policy": {"kind": "dqn", "run": str(run)}})
+    meta = json.loads((out / "meta.json").read_text())
+    assert meta["policy"]["checkpoint"].endswith("checkpoint-000000000005")     # the weights used are recorded
+    assert meta["plan"]["repeats"] == 1 and summary["episodes"] == 2                 # deterministic: one per question
+    r = load_records(out)
+    assert (r[keys.PUSHES] == 2).all() or r[keys.STOPPED].any()                 # greedy episodes ran to an end
+    out = tmp_path / "none"
+    collect_rollouts(out, dataset=small_dataset, levels=levels, **{**plan, "policy": {"kind": "none"}})
+    r = load_records(out)
+    assert (r[keys.PUSHES] == 0).all() and r[keys.STOPPED].all() and torch.equal(r[keys.FIRST_RGB], r[keys.LAST_RGB])
+    out = tmp_path / "privileged"
+    collect_rollouts(out, dataset=small_dataset, levels=levels, **{**plan, "policy": {"kind": "privileged", "lookahead": 1}})
+    r = load_records(out)
+    assert r.shape[0] == 2 and (r[keys.PUSHES] <= 2).all()

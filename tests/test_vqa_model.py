@@ -1,0 +1,96 @@
+"""The VQA model and its public contract: forward / backward, attention over the two frames, the
+checkpoint round trip, and clear errors for missing, corrupt or mismatched checkpoints and for
+questions outside the vocabulary."""
+
+import pytest
+import torch
+
+from mqa_rl.data.vocab import Vocabulary
+from mqa_rl.modules.vqa import VQAModel, load_vqa, save_vqa
+
+VOCAB = Vocabulary.build(["How many cans are there in the bin?", "Is there a can in the bin?",
+                          "How many apples are there in the bin?"]).itos
+ANSWERS = ("0", "1", "2", "3", "yes", "no")
+
+
+def _batch(model, b=3, size=224):
+    gen = torch.Generator().manual_seed(0)
+    q = model.tokenize(["How many cans are there in the bin?", "Is there a can in the bin?",
+                        "How many apples are there in the bin?"][:b])
+    first = torch.randint(0, 256, (b, 3, size, size), dtype=torch.uint8, generator=gen)
+    last = torch.randint(0, 256, (b, 3, size, size), dtype=torch.uint8, generator=gen)
+    return q, first, last
+
+
+@pytest.mark.parametrize("pool", ["eqa", "cells", "classes"])
+@pytest.mark.parametrize("frozen", [True, False])
+def test_forward_backward_and_attention_over_two_frames(pool, frozen):
+    torch.manual_seed(0)
+    model = VQAModel(VOCAB, ANSWERS, pool=pool, freeze_encoder=frozen).train()
+    q, first, last = _batch(model)
+    logits, attention = model(q, first, last)
+    assert logits.shape == (3, len(ANSWERS)) and attention.shape == (3, 2)
+    assert torch.allclose(attention.sum(-1), torch.ones(3)) and (attention >= 0).all()
+    torch.nn.functional.cross_entropy(logits, torch.tensor([1, 4, 2])).backward()
+    # "classes" reads the class head on the third block; the others read the fourth block's bottleneck
+    used = [*model.encoder.net[:12].parameters(), *model.encoder.class_head.parameters()] if pool == "classes" \
+        else list(model.encoder.net.parameters())
+    enc_grads = [p.grad for p in used]
+    if frozen:
+        assert all(g is None for g in enc_grads) and not model.encoder.training     # BN statistics stay fixed
+    else:
+        assert all(g is not None and torch.isfinite(g).all() for g in enc_grads) and model.encoder.training
+    head = [p for n, p in model.named_parameters() if not n.startswith("encoder.")]
+    assert all(p.grad is not None and torch.isfinite(p.grad).all() for p in head)
+    # the cached-features path gives the same answer as the image path
+    model.eval()
+    with torch.no_grad():
+        a, _ = model(q, first, last)
+        b, _ = model.forward_features(q, model.encode_frames(first), model.encode_frames(last))
+    assert torch.allclose(a, b, atol=1e-5)
+
+
+def test_answer_probs_contract_and_round_trip(tmp_path):
+    torch.manual_seed(0)
+    model = VQAModel(VOCAB, ANSWERS, pool="cells")
+    q, first, last = _batch(model, b=2)
+    hwc = (first.permute(0, 2, 3, 1).contiguous(), last.permute(0, 2, 3, 1).contiguous())
+    probs = model.answer_probs(q, *hwc)
+    assert probs.shape == (2, 6) and probs.dtype == torch.float32 and torch.allclose(probs.sum(-1), torch.ones(2))
+    assert model.training                                          # answer_probs leaves the mode as it was
+    small = model.answer_probs(q, hwc[0][:, ::2, ::2].contiguous(), hwc[1][:, ::2, ::2].contiguous())
+    assert small.shape == (2, 6)                                   # other image sizes are resized
+    save_vqa(model, tmp_path / "run" / "vqa.pt", meta={"system": "random"})
+    for where in (tmp_path / "run", tmp_path / "run" / "vqa.pt"):
+        loaded = load_vqa(where)
+        assert loaded.answers == list(ANSWERS) and not loaded.training and loaded.meta["system"] == "random"
+        assert torch.allclose(loaded.answer_probs(q, *hwc), model.eval().answer_probs(q, *hwc), atol=1e-6)
+    assert not list((tmp_path / "run").glob(".*"))                 # nothing half-written left behind
+
+
+def test_clear_errors_for_checkpoints_and_questions(tmp_path):
+    model = VQAModel(VOCAB, ANSWERS)
+    with pytest.raises(FileNotFoundError, match="train_vqa.py"):
+        load_vqa(tmp_path / "nowhere")
+    path = save_vqa(model, tmp_path / "vqa.pt")
+    data = path.read_bytes()
+    (tmp_path / "cut.pt").write_bytes(data[: len(data) // 2])
+    with pytest.raises(ValueError, match="truncated"):
+        load_vqa(tmp_path / "cut.pt")
+    torch.save({"policy": torch.zeros(3)}, tmp_path / "dqn.pt")
+    with pytest.raises(ValueError, match="not a VQA checkpoint"):
+        load_vqa(tmp_path / "dqn.pt")
+    blob = torch.load(path, weights_only=True)
+    blob["config"]["dim"] = 32                                       # weights of another architecture
+    torch.save(blob, tmp_path / "mismatch.pt")
+    with pytest.raises(ValueError, match="does not fit"):
+        load_vqa(tmp_path / "mismatch.pt")
+    with pytest.raises(ValueError, match="unknown question word 'zebras'"):
+        model.tokenize("How many zebras are there in the bin?")
+    img = torch.zeros(1, 224, 224, 3, dtype=torch.uint8)
+    with pytest.raises(ValueError, match="unknown word"):
+        model.answer_probs(torch.tensor([[1, 3]]), img, img)
+    with pytest.raises(ValueError, match="another dataset"):
+        model.answer_probs(torch.tensor([[len(VOCAB) + 5]]), img, img)
+    with pytest.raises(ValueError, match="uint8"):
+        model.answer_probs(model.tokenize("How many cans are there in the bin?"), img.float(), img)

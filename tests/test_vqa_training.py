@@ -1,0 +1,149 @@
+"""Learning to answer: the VQA loss falls on a small fixed batch, the encoder pretrains on a few
+frames, and the train_vqa / pretrain recipes write loadable models, log, and resume."""
+
+import csv
+
+import pytest
+import torch
+from conftest import compose_recipe_config, load_recipe
+from tensordict import TensorDict
+from torch_threads import one_torch_thread  # noqa: F401  (autouse)
+
+from mqa_rl import keys
+from mqa_rl.data.vocab import Vocabulary
+from mqa_rl.losses.encoder_pretraining import EncoderPretrainLoss
+from mqa_rl.losses.vqa import VQALoss
+from mqa_rl.modules.vqa import VQAModel, load_vqa, vqa_module
+from mqa_rl.modules.vqa_encoder import FrameEncoder, PretrainHeads, load_encoder, save_encoder
+from mqa_rl.training.checkpoint import CheckpointCorrupt
+from mqa_rl.training.vqa_data import Batches, dihedral, encode_store, pretraining_frames
+
+TEXTS = ["How many cans are there in the bin?", "How many apples are there in the bin?"]
+
+
+def _squares(counts: torch.Tensor, gen: torch.Generator) -> torch.Tensor:
+    """Black images with ``count`` white 30 px squares each: a toy counting batch."""
+    images = torch.zeros(len(counts), 3, 224, 224, dtype=torch.uint8)
+    for i, k in enumerate(counts.tolist()):
+        for _ in range(k):
+            y, x = torch.randint(0, 190, (2,), generator=gen).tolist()
+            images[i, :, y:y + 30, x:x + 30] = 255
+    return images
+
+
+@pytest.mark.parametrize("pool", ["eqa", "cells"])       # "classes" needs a pretrained class head (see below)
+def test_vqa_loss_decreases_on_a_fixed_batch(pool):
+    torch.manual_seed(0)
+    gen = torch.Generator().manual_seed(0)
+    model = VQAModel(Vocabulary.build(TEXTS).itos, ("0", "1", "2", "3", "yes", "no"), pool=pool, dropout=0.0)
+    loss = VQALoss(vqa_module(model))
+    counts = torch.tensor([0, 1, 2, 3, 3, 2, 1, 0])
+    batch = TensorDict({keys.QUESTION: model.tokenize(TEXTS * 4), keys.FIRST_RGB: _squares(counts, gen),
+                        keys.LAST_RGB: _squares(counts, gen), keys.ANSWER_LABEL: counts}, batch_size=[8])
+    optim = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=3e-3)
+    with torch.no_grad():
+        first = loss(batch)
+    assert set(first.keys()) == {"loss_vqa", "accuracy"} and 0 <= float(first["accuracy"]) <= 1
+    for _ in range(60):
+        out = loss(batch)
+        optim.zero_grad()
+        out["loss_vqa"].backward()
+        optim.step()
+    with torch.no_grad():
+        last = loss(batch)
+    # a frozen random encoder: the question-conditioned pools have less to work with than EQA's linear layer
+    assert float(last["loss_vqa"]) < (0.5 if pool == "eqa" else 0.75) * float(first["loss_vqa"])
+    assert float(last["accuracy"]) > float(first["accuracy"])
+    loss.set_keys(answer="other")                                       # keys are declared once, renamable
+    assert "other" in loss.in_keys and keys.ANSWER_LABEL not in loss.in_keys
+
+
+def test_dihedral_transforms_are_the_8_symmetries_of_the_square():
+    x = torch.arange(9).view(1, 3, 3)
+    images = {tuple(dihedral(x, k).flatten().tolist()) for k in range(8)}
+    assert len(images) == 8 and torch.equal(dihedral(x, 0), x)
+
+
+def test_encoder_pretrains_on_a_few_frames(small_dataset, answering_root, tmp_path):
+    root, _ = answering_root
+    store = root / "rollouts" / "counting" / "random" / "train"
+    frames = pretraining_frames([store], small_dataset, max_frames=4, seed=0)
+    assert frames.shape == (4,) and frames[keys.CLASS_MAP].dtype == torch.uint8
+    for f in frames:                                         # classes follow from the objects' slots
+        objects = small_dataset.scenes[int(f[keys.SCENE])].objects
+        j = int(f[keys.OBJECT_MAP].max())
+        name = small_dataset.classes[int(f[keys.CLASS_MAP][f[keys.OBJECT_MAP] == j][0]) - 1]
+        assert name == objects[j - 1].class_name
+    all_frames = pretraining_frames([store], small_dataset)
+    scenes = all_frames[keys.SCENE].tolist()
+    assert len(all_frames) <= len(set(scenes)) + 12           # each scene's first image once, then pushed ones
+    torch.manual_seed(0)
+    encoder = FrameEncoder(num_classes=1 + len(small_dataset.classes))
+    loss = EncoderPretrainLoss(encoder, PretrainHeads(32, 1 + len(small_dataset.classes)),
+                               camera_distance=small_dataset.camera.distance)
+    optim = torch.optim.Adam(loss.parameters(), lr=2e-3)
+
+    def total(out):
+        return sum(v for k, v in out.items() if k.startswith("loss_"))
+
+    with torch.no_grad():
+        start = float(total(loss(frames)))
+    for _ in range(15):
+        out = loss(frames)
+        optim.zero_grad()
+        total(out).backward()
+        optim.step()
+    loss.eval()
+    with torch.no_grad():
+        end = loss(frames)
+    assert float(total(end)) < 0.7 * start and 0 <= float(end["class_accuracy"]) <= 1
+    assert 0 <= float(end["count_exact"]) <= 1
+    path = save_encoder(encoder, tmp_path / "encoder.pt", {"frames": 4})
+    again, meta = load_encoder(path)
+    assert meta == {"frames": 4} and torch.equal(again.state_dict()["net.0.weight"], encoder.state_dict()["net.0.weight"])
+    with pytest.raises(FileNotFoundError, match="pretrain_vqa_encoder.py"):
+        load_encoder(tmp_path / "none.pt")
+    torch.save({"format": "mqa_rl.vqa"}, tmp_path / "vqa.pt")
+    with pytest.raises(ValueError, match="not a VQA encoder file"):
+        load_encoder(tmp_path / "vqa.pt")
+    # frozen features of a store: one row per record, per dihedral transform
+    model = VQAModel(small_dataset.vocab.itos, small_dataset.answers).eval()
+    records = encode_store(store, model.encode_frames, transforms=2)
+    assert records[keys.FIRST_FEATURES].shape == (records.shape[0], 2, 32, 10, 10)
+    batch = Batches(records, 4, augment=True).sample()
+    assert batch[keys.FIRST_FEATURES].shape == (4, 32, 10, 10) and batch[keys.FIRST_FEATURES].dtype == torch.float32
+
+
+def _steps(run, name):
+    with open(run / "csv" / "scalars" / f"{name}.csv") as f:
+        return [int(float(row[0])) for row in csv.reader(f)]
+
+
+def test_pretrain_and_train_vqa_recipes_write_log_and_resume(small_dataset, answering_root):
+    root, overrides = answering_root
+    quiet = ["logger.wandb=false", "logger.progress=false"]
+    pretrain = load_recipe("pretrain_vqa_encoder")
+    summary = pretrain.pretrain(compose_recipe_config("pretrain_vqa_encoder", [
+        *overrides, *quiet, "train.steps=2", "train.batch_size=2", "train.eval_interval=1", "frames.max_frames=8"]))
+    assert (root / "encoder" / "encoder.pt").exists() and summary["steps"] == 2
+    train_vqa = load_recipe("train_vqa")
+    args = [*overrides, *quiet, "system=random", "vqa=cells", "train.batch_size=4", "train.eval_interval=3",
+            "checkpoint.interval_steps=3"]
+    first = train_vqa.train(compose_recipe_config("train_vqa", [*args, "train.steps=6"]))
+    run = root / "vqa" / "counting-cells" / "random"
+    assert first["steps"] == 6 and (run / "vqa.pt").exists() and (run / "config.yaml").exists()
+    with pytest.raises(FileExistsError, match="resume=true"):
+        train_vqa.train(compose_recipe_config("train_vqa", [*args, "train.steps=6"]))
+    again = train_vqa.train(compose_recipe_config("train_vqa", [*args, "train.steps=9", "resume=true"]))
+    assert again["steps"] == 9
+    assert _steps(run, "train/loss") == [3, 6, 9]                        # continued, nothing logged twice
+    model = load_vqa(run)
+    assert model.meta["system"] == "random" and model.meta["encoder"]["frozen"] and model.answers == list(small_dataset.answers)
+    # a checkpoint whose files were altered is refused with what to do
+    latest = sorted((run / "checkpoints").glob("checkpoint-*"))[-1]
+    victim = next(p for p in (latest / "components").rglob("*") if p.is_file() and p.stat().st_size > 100)
+    victim.write_bytes(victim.read_bytes()[:50])
+    with pytest.raises(CheckpointCorrupt, match="delete"):
+        train_vqa.train(compose_recipe_config("train_vqa", [*args, "train.steps=12", "resume=true"]))
+    with pytest.raises(FileNotFoundError, match="collect"):
+        train_vqa.train(compose_recipe_config("train_vqa", [*args, "system=privileged"]))

@@ -1,0 +1,42 @@
+#!/usr/bin/env bash
+# The whole MQA pipeline at a quick CPU scale (recipes' `answering=quick` profile), after the dataset:
+#   1. train DQN(R_l) briefly (480 frames)                           -> runs/main/dqn_local
+#   2. roll out random, no manipulation, DQN(R_l), privileged (40 train + 30 test COUNTING questions
+#      per level; random twice per training question)               -> runs/main/rollouts
+#   3. pretrain the VQA encoder on the random rollouts' frames       -> runs/main/encoder
+#   4. train one VQA per system on its rollouts                       -> runs/main/vqa
+#   5. Table III as measured (+ per type, policies, Fig. 7)           -> runs/main/report
+#   6. videos of greedy DQN(R_l) episodes with Q-map overlays         -> runs/main/videos
+# Every step resumes or skips what is done, so an interrupted run continues where it stopped.
+# Overrides for a smaller run (the tests use them): MQA_ROOT, MQA_EXTRA (all answering recipes),
+# MQA_DQN (train_dqn.py), MQA_PRETRAIN, MQA_VQA (extra arguments of those recipes).
+set -euo pipefail
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
+ROOT=${MQA_ROOT:-runs/main}
+read -r -a EXTRA <<< "${MQA_EXTRA:-}"
+read -r -a DQN <<< "${MQA_DQN:-collector.total_frames=480 collector.annealing_frames=320 collector.learning_starts=64 eval.interval_frames=480 eval.episodes=3 checkpoint.interval_frames=480 buffer.size=480}"
+read -r -a PRETRAIN <<< "${MQA_PRETRAIN:-train.steps=100 train.batch_size=16 train.eval_interval=50 frames.max_frames=600}"
+read -r -a VQA <<< "${MQA_VQA:-train.steps=600 train.eval_interval=100}"
+A=(answering=quick "root=$ROOT" "systems.dqn_local.run=$ROOT/dqn_local" "${EXTRA[@]}")
+SYSTEMS=(random no_manipulation dqn_local privileged)
+start=$SECONDS
+step() { echo; echo "=== [$(( (SECONDS - start) / 60 )) min] $*"; }
+
+step "1/6 DQN(R_l), briefly"
+python recipes/train_dqn.py reward=local "out_dir=$ROOT/dqn_local" resume=true "${DQN[@]}"
+for s in "${SYSTEMS[@]}"; do
+  step "2/6 rollouts of $s"
+  python recipes/collect_rollouts.py "${A[@]}" "system=$s"
+done
+step "3/6 VQA encoder pretraining"
+python recipes/pretrain_vqa_encoder.py "${A[@]}" resume=true "${PRETRAIN[@]}"
+for s in "${SYSTEMS[@]}"; do
+  step "4/6 VQA of $s"
+  python recipes/train_vqa.py "${A[@]}" "system=$s" resume=true "${VQA[@]}"
+done
+step "5/6 Table III"
+python recipes/evaluate.py "${A[@]}" "report=[$(IFS=,; echo "${SYSTEMS[*]}")]"
+step "6/6 videos of DQN(R_l)"
+python recipes/evaluate_policy.py "run=$ROOT/dqn_local" "policies=[greedy]" episodes_per_level=1 video_episodes=1 \
+  video_format=mp4 "out_dir=$ROOT/videos"
+step "done: $ROOT/report (table3.md, table3.png, per_type.md, policy.md, fig7_rewards.png), $ROOT/videos"
