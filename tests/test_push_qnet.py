@@ -149,7 +149,8 @@ def test_masked_actions_are_never_chosen():
                          keys.ACTION_MASK: mask.expand(64, -1).clone()}, [64])
         with torch.no_grad():
             greedy = actor(td.clone())[keys.ACTION]
-            random = explorer(td.clone())[keys.ACTION]
+            # EGreedyModule draws one random action per call for an unbatched spec: call it 20 times
+            random = torch.cat([explorer(td.clone())[keys.ACTION] for _ in range(20)])
         assert mask[greedy].all() and mask[random].all()
         assert random.unique().numel() > 1                 # ε = 1 really explores
 

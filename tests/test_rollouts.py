@@ -112,6 +112,7 @@ def _fake_dqn_run(run, env):
     from torchrl.checkpoint import Checkpoint, CheckpointRotation
 
     from mqa_rl.modules.push_policy import make_push_qnet, make_q_actor
+    from mqa_rl.training.checkpoint import INTEGRITY, IntegrityAdapter
 
     model = OmegaConf.load(Path(__file__).parents[1] / "recipes" / "conf" / "trunk" / "light.yaml")
     cfg = OmegaConf.create({"model": model, "action_mask": True})
@@ -119,7 +120,9 @@ def _fake_dqn_run(run, env):
     OmegaConf.save(cfg, run / "config.yaml")
     net = make_push_qnet(cfg.model, vocab_size=len(env.dataset.vocab), camera_distance=env.camera.distance)
     actor = make_q_actor(net, env.action_spec)
-    CheckpointRotation(run / "checkpoints", keep_last=1).save(Checkpoint(policy=actor), step=5)
+    ckpt = Checkpoint(policy=actor)
+    ckpt.register(INTEGRITY, {}, adapter=IntegrityAdapter())          # load_greedy checks the files' SHA-256
+    CheckpointRotation(run / "checkpoints", keep_last=1).save(ckpt, step=5)
 
 
 def test_dqn_checkpoint_and_reference_policies(small_dataset, tmp_path):
