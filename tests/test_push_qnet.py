@@ -4,6 +4,7 @@ trunk weights files fail clearly."""
 import numpy as np
 import pytest
 import torch
+from torchrl.envs.utils import ExplorationType, set_exploration_type
 from torchrl.data import Categorical
 
 from mqa_rl import keys
@@ -150,7 +151,8 @@ def test_masked_actions_are_never_chosen():
         with torch.no_grad():
             greedy = actor(td.clone())[keys.ACTION]
             # EGreedyModule draws one random action per call for an unbatched spec: call it 20 times
-            random = torch.cat([explorer(td.clone())[keys.ACTION] for _ in range(20)])
+            with set_exploration_type(ExplorationType.RANDOM):    # not whatever another test left global
+                random = torch.cat([explorer(td.clone())[keys.ACTION] for _ in range(20)])
         assert mask[greedy].all() and mask[random].all()
         assert random.unique().numel() > 1                 # ε = 1 really explores
 

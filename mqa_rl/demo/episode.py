@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
-from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
+from torchrl.envs.utils import step_mdp
 
 from mqa_rl import keys
 from mqa_rl.envs import actions
@@ -99,10 +99,13 @@ def step_frame(before, after, camera, question: str, step: int) -> np.ndarray:
 
 @torch.no_grad()
 def _act_and_step(env, policy, td):
-    # grad mode and the exploration type are set per step, never across a yield: Gradio resumes the
-    # generator in any of its worker threads, and grad mode is per thread
-    with set_exploration_type(ExplorationType.DETERMINISTIC):
-        return env.step(policy(td))
+    # grad mode is set per step, never across a yield: Gradio resumes the generator in any of its
+    # worker threads, and grad mode is per thread. The exploration type is NOT set here: TorchRL keeps
+    # it in a process-wide global, and two sessions entering and leaving set_exploration_type in
+    # interleaved threads left it at DETERMINISTIC for the whole process (measured: ε-greedy stopped
+    # exploring in later tests). The demo's policies need none: the greedy QValueActor is
+    # deterministic and the random baseline is random in every mode.
+    return env.step(policy(td))
 
 
 def play(env, policy, question_id: str, question_text: str) -> Iterator[StepView]:
