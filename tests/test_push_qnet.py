@@ -150,7 +150,7 @@ def test_masked_actions_are_never_chosen():
                          keys.ACTION_MASK: mask.expand(64, -1).clone()}, [64])
         with torch.no_grad():
             greedy = actor(td.clone())[keys.ACTION]
-            # EGreedyModule draws one random action per call for an unbatched spec: call it 20 times
+            # several calls, under RANDOM whatever an earlier test left in the process-wide setting
             with set_exploration_type(ExplorationType.RANDOM):    # not whatever another test left global
                 random = torch.cat([explorer(td.clone())[keys.ACTION] for _ in range(20)])
         assert mask[greedy].all() and mask[random].all()
