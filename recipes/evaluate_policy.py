@@ -17,8 +17,8 @@ reward config matches too (else it is left out).
 
 from __future__ import annotations
 
+import io
 import json
-import os
 from pathlib import Path
 
 import hydra
@@ -28,6 +28,7 @@ from omegaconf import DictConfig, OmegaConf
 from mqa_rl.envs.factory import make_mqa_env
 from mqa_rl.envs.qmap_overlay import qmap_episode_frames
 from mqa_rl.envs.video import write_video
+from mqa_rl.evaluation.answering_report import write_atomic
 from mqa_rl.evaluation.episode_metrics import mean_ci95
 from mqa_rl.evaluation.rollouts import run_episodes
 from mqa_rl.modules.random_policy import RandomMQAPolicy
@@ -58,13 +59,6 @@ def reuse_baseline(folder, name: str, meta: dict) -> dict[str, torch.Tensor] | N
         metrics = {k: v for k, v in metrics.items() if k != "reward" and not k.startswith("term/")}
     print(f"  {name}: reused {path}")
     return metrics
-
-
-def save_atomic(path: Path, write) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.parent / f".{path.name}.tmp{os.getpid()}"
-    write(tmp)
-    os.replace(tmp, path)
 
 
 @hydra.main(config_path="conf", config_name="evaluate_policy", version_base="1.3")
@@ -105,7 +99,9 @@ def main(cfg: DictConfig) -> None:
                 raise ValueError(f"unknown policy {name!r}; choose among greedy, random, random_masked")
             m = reused if reused is not None else run_episodes(
                 env, policy, cfg.episodes_per_level, max_pushes=max_pushes, simple_threshold=threshold, on_episode=on_episode)
-            save_atomic(out / "episodes" / f"{name}_{level}.pt", lambda p, m=m: torch.save({"meta": meta, "metrics": m}, p))
+            buffer = io.BytesIO()
+            torch.save({"meta": meta, "metrics": m}, buffer)
+            write_atomic(out / "episodes" / f"{name}_{level}.pt", buffer.getvalue())
             per_policy[name] = m
             nan = torch.full((cfg.episodes_per_level,), float("nan"))
             results.setdefault(level, {})[name] = {k: dict(zip(("mean", "ci95", "n"), mean_ci95(m.get(k, nan))))
@@ -125,7 +121,7 @@ def main(cfg: DictConfig) -> None:
             lines.append(f"| {name} | " + " | ".join(f"{row[k]['mean']:+.3f} ± {row[k]['ci95']:.3f} (n={row[k]['n']})"
                                                    for k in REPORTED) + " |")
     for name, text in (("results.json", json.dumps(results, indent=2)), ("results.md", "\n".join(lines) + "\n")):
-        save_atomic(out / name, lambda p, text=text: p.write_text(text))
+        write_atomic(out / name, text)
     print("\n".join(lines))
     print(f"written to {out}")
 

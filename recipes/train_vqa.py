@@ -31,6 +31,7 @@ import torch  # noqa: E402
 from omegaconf import DictConfig, OmegaConf  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
+from mqa_rl.evaluation.answering_report import write_atomic  # noqa: E402
 from mqa_rl import keys  # noqa: E402
 from mqa_rl.collectors.rollouts import dataset_fingerprint  # noqa: E402
 from mqa_rl.collectors.store import read_meta  # noqa: E402
@@ -210,9 +211,7 @@ def train(cfg: DictConfig) -> dict:
                "best_val_accuracy": state["best_val"] if val_set is not None else None, "best_step": state["best_step"],
                "feature_seconds": round(feature_seconds, 1), "train_seconds": round(state["train_seconds"], 1),
                "vqa": str(out / CHECKPOINT_NAME)}
-    tmp = out / f".summary.json.tmp{os.getpid()}"
-    tmp.write_text(json.dumps(summary, indent=1))
-    os.replace(tmp, out / "summary.json")
+    write_atomic(out / "summary.json", json.dumps(summary, indent=1))
     print("done:", summary)
     return summary
 

@@ -107,12 +107,7 @@ class TrainingCheckpoint:
             raise RuntimeError("load a checkpoint into a fresh run only (this replay buffer already holds data)")
         hint = (f"delete {path} to resume from an older checkpoint in {self.directory}, "
                 f"or start afresh with resume=false (or another out_dir)")
-        try:
-            IntegrityAdapter.verify(path)
-            self.checkpoint.load(path, strict="error")
-        except (CheckpointError, OSError, ValueError, KeyError, RuntimeError, EOFError) as error:
-            raise CheckpointCorrupt(f"checkpoint {path} cannot be restored ({type(error).__name__}: "
-                                    f"{str(error)[:500]}); {hint}") from error
+        restore_verified(self.checkpoint, path, hint)
         missing = {"frames", "updates"} - set(self.state)
         if missing:
             raise CheckpointCorrupt(f"checkpoint {path} lacks the run counters {sorted(missing)}; {hint}")
@@ -120,3 +115,14 @@ class TrainingCheckpoint:
             self.target_updater.counter = int(self.state.get("target_updater_counter", 0))
         self.beta_counter.fill_(int(self.state.get("beta_steps", 0)))
         return path
+
+
+def restore_verified(checkpoint, path: Path, hint: str) -> None:
+    """``checkpoint.load(path)`` after checking every file's SHA-256; any failure → ``CheckpointCorrupt``
+    saying ``hint`` (what to do)."""
+    try:
+        IntegrityAdapter.verify(path)
+        checkpoint.load(path, strict="error")
+    except (CheckpointError, OSError, ValueError, KeyError, RuntimeError, EOFError) as error:
+        raise CheckpointCorrupt(f"checkpoint {path} cannot be restored ({type(error).__name__}: "
+                                f"{str(error)[:500]}); {hint}") from error

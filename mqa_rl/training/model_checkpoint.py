@@ -12,9 +12,9 @@ from pathlib import Path
 
 from torch import nn
 from torch.optim import Optimizer
-from torchrl.checkpoint import Checkpoint, CheckpointError, CheckpointRotation, GlobalRNGState
+from torchrl.checkpoint import Checkpoint, CheckpointRotation, GlobalRNGState
 
-from mqa_rl.training.checkpoint import INTEGRITY, CheckpointCorrupt, IntegrityAdapter
+from mqa_rl.training.checkpoint import INTEGRITY, CheckpointCorrupt, IntegrityAdapter, restore_verified
 
 
 class ModelCheckpoint:
@@ -47,12 +47,7 @@ class ModelCheckpoint:
             raise FileNotFoundError(f"no checkpoint in {self.directory}")
         hint = (f"delete {path} to resume from an older checkpoint in {self.directory}, or start afresh "
                 f"with resume=false and another out_dir")
-        try:
-            IntegrityAdapter.verify(path)
-            self.checkpoint.load(path, strict="error")
-        except (CheckpointError, OSError, ValueError, KeyError, RuntimeError, EOFError) as error:
-            raise CheckpointCorrupt(f"checkpoint {path} cannot be restored ({type(error).__name__}: "
-                                    f"{str(error)[:500]}); {hint}") from error
+        restore_verified(self.checkpoint, path, hint)
         if "step" not in self.state:
             raise CheckpointCorrupt(f"checkpoint {path} lacks the step counter; {hint}")
         return path
