@@ -80,6 +80,7 @@ FRAME_VISIBLE = "visible_area"                # under FIRST / LAST: float32 [K] 
 FRAME_FULL = "full_area"                      # under FIRST / LAST: float32 [K] A_t
 OBJECT_MAP = "object_map"                     # under FIRST / LAST: uint8 [H, W] 0 = bin, 1 + the object's slot (scene order)
 CLASS_MAP = "class_map"                       # pretraining frames: uint8 [H, W] 0 = bin, 1 + index into MQADataset.classes
+CLASS_CELLS = "class_cells"                   # push-trunk pretraining frames: float16 [1 + classes, GRID, GRID] class fractions per action-grid cell (SapienBinEnv.class_cells)
 
 # the VQA (mqa_rl.modules.vqa) and its loss (mqa_rl.losses.vqa)
 FIRST_FEATURES = (FIRST, "features")          # float [C, h, w] VQAModel.encode_frames(I_start), cached when frozen

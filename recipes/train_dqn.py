@@ -42,6 +42,7 @@ from mqa_rl.evaluation.rollouts import run_episodes
 from mqa_rl.losses.dqn import make_dqn_loss
 from mqa_rl.losses.replay import annealed_is_beta, compact_transitions, make_replay_buffer
 from mqa_rl.losses.target_map import TargetMapLoss
+from mqa_rl.modules.pretrained_recognition import load_recognition
 from mqa_rl.modules.push_policy import make_explorer, make_push_qnet, make_q_actor
 from mqa_rl.training.checkpoint import TrainingCheckpoint
 from mqa_rl.training.run_logger import RunLogger, trim_scalars
@@ -59,8 +60,8 @@ def check_config(cfg: DictConfig) -> None:
                          f"collector.frames_per_batch={col.frames_per_batch}")
     if loss.updates_per_batch < 0:
         raise ValueError(f"loss.updates_per_batch={loss.updates_per_batch} must be ≥ 0")
-    if cfg.loss.get("target_map_weight", 0) > 0 and not cfg.model.get("target_head", False):
-        raise ValueError(f"loss.target_map_weight={cfg.loss.target_map_weight} needs model.target_head=true "
+    if cfg.loss.get("target_map_weight", 0) > 0 and not (cfg.model.get("target_head") or cfg.model.get("class_map")):
+        raise ValueError(f"loss.target_map_weight={cfg.loss.target_map_weight} needs model.target_head=true or model.class_map=true "
                          f"(the auxiliary head it trains)")
     if buf.size < buf.batch_size:
         raise ValueError(f"buffer.size={buf.size} must be ≥ buffer.batch_size={buf.batch_size}")
@@ -121,7 +122,13 @@ def train(cfg: DictConfig) -> dict:
                             seed=cfg.seed + 10_000)
     vocab = eval_env.observation_spec[keys.QUESTION].space.n
     device = learner_device(cfg.device)
-    net = make_push_qnet(cfg.model, vocab_size=vocab, camera_distance=eval_env.base_env.camera.distance).to(device)
+    classes = eval_env.base_env.dataset.classes
+    net = make_push_qnet(cfg.model, vocab_size=vocab, camera_distance=eval_env.base_env.camera.distance,
+                         num_classes=len(classes))
+    if cfg.model.get("pretrained"):              # recognition learnt from the segmentation (pretrain_push_trunk.py)
+        meta = load_recognition(net, cfg.model.pretrained, classes, freeze=cfg.model.get("pretrained_frozen", True))
+        print(f"recognition from {cfg.model.pretrained}: {meta}")
+    net = net.to(device)
     actor = make_q_actor(net, eval_env.action_spec, masked=cfg.action_mask)
     explore = make_explorer(actor, eval_env.action_spec, eps_init=col.eps_init, eps_end=col.eps_end,
                             annealing_frames=col.annealing_frames, masked=cfg.action_mask).to(device)

@@ -184,6 +184,7 @@ class SapienBinEnv(EnvBase):
         self.question = question
         self._projector = SilhouetteProjector([list(a.collision_parts) for a in assets], self.camera)
         self._target = np.array([a.class_name in question.classes for a in assets])
+        self._object_class = np.array([1 + self.dataset.classes.index(a.class_name) for a in assets])  # 0: no object
         self._push_count = 0
         self._done = False
         tokens = torch.zeros(self.question_length, dtype=torch.int64)
@@ -314,15 +315,34 @@ class SapienBinEnv(EnvBase):
 
     def _target_cells(self, seg: np.ndarray) -> np.ndarray:
         """Fraction of each action-grid cell's pixels where a target is visible (from the segmentation)."""
-        ids = self.world.entity_ids()[self._target]
-        hit = np.isin(seg, ids).astype(np.float32)
-        h, w = hit.shape
-        rows = (np.arange(h) * actions.GRID) // h            # pixel -> grid row / column (any image size)
-        cols = (np.arange(w) * actions.GRID) // w
-        cells = np.zeros((actions.GRID, actions.GRID), np.float32)
-        np.add.at(cells, (rows[:, None], cols[None, :]), hit)
-        counts = np.bincount(rows, minlength=actions.GRID)[:, None] * np.bincount(cols, minlength=actions.GRID)[None, :]
-        return (cells / counts).astype(np.float32)
+        return _cell_fractions(np.isin(seg, self.world.entity_ids()[self._target]).astype(np.float32)[None])[0]
+
+    def class_cells(self) -> np.ndarray:
+        """[1 + classes, GRID, GRID]: fraction of each action-grid cell's pixels showing each object class
+        (channel 1 + ``dataset.classes.index(name)``; channel 0: no object, i.e. bin or floor) in the last
+        observation. The simulator's segmentation: a pretraining signal (``recipes/pretrain_push_trunk.py``),
+        never a policy input."""
+        if self.world is None:
+            raise RuntimeError("call reset() before class_cells()")
+        seg = self._last_measure["seg"]
+        lut = np.zeros(int(max(seg.max(), self.world.entity_ids().max())) + 1, np.int64)
+        lut[self.world.entity_ids()] = self._object_class
+        labels = lut[seg]
+        onehot = (labels[None] == np.arange(1 + len(self.dataset.classes))[:, None, None]).astype(np.float32)
+        return _cell_fractions(onehot)
 
     def _set_seed(self, seed: int | None) -> None:
         self._rng = np.random.default_rng(seed)
+
+
+def _cell_fractions(masks: np.ndarray) -> np.ndarray:
+    """Float masks [C, H, W] → [C, GRID, GRID]: their mean over each action-grid cell's pixels."""
+    c, h, w = masks.shape
+    if h % actions.GRID == 0 and w % actions.GRID == 0:          # equal cells (224 px: 8 × 8 each)
+        return masks.reshape(c, actions.GRID, h // actions.GRID, actions.GRID, w // actions.GRID).mean((2, 4)).astype(np.float32)
+    rows = (np.arange(h) * actions.GRID) // h            # pixel -> grid row / column (any image size)
+    cols = (np.arange(w) * actions.GRID) // w
+    cells = np.zeros((c, actions.GRID, actions.GRID), np.float32)
+    np.add.at(cells, (slice(None), rows[:, None], cols[None, :]), masks)
+    counts = np.bincount(rows, minlength=actions.GRID)[:, None] * np.bincount(cols, minlength=actions.GRID)[None, :]
+    return (cells / counts).astype(np.float32)

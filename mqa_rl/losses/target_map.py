@@ -28,8 +28,9 @@ class TargetMapLoss(LossModule):
 
     def __init__(self, net: torch.nn.Module, weight: float = 1.0):
         super().__init__()
-        if getattr(net, "target_head", None) is None:
-            raise ValueError("TargetMapLoss needs a PushQNet built with target_head=True (model.target_head=true)")
+        if getattr(net, "target_head", None) is None and getattr(net, "class_head", None) is None:
+            raise ValueError("TargetMapLoss needs a PushQNet built with target_head=True or class_map=True "
+                             "(model.target_head=true or model.class_map=true)")
         if not weight > 0:
             raise ValueError(f"the target-map loss weight must be > 0, got {weight}")
         self.net = net

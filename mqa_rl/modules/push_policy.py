@@ -17,17 +17,18 @@ from mqa_rl import keys
 from mqa_rl.modules.push_qnet import PushQNet
 
 QNET_OPTIONS = {"trunk", "weights", "light_channels", "light_downsample", "fuse_channels", "question_dim", "head_channels",
-                "head_context", "coords", "depth_scale", "freeze_trunk", "target_head", "film"}
+                "head_context", "coords", "depth_scale", "freeze_trunk", "target_head", "film", "class_map"}
+LOADED_BY_RECIPE = {"name", "masked", "pretrained", "pretrained_frozen"}   # not PushQNet arguments
 
 
-def make_push_qnet(cfg: Mapping, *, vocab_size: int, camera_distance: float) -> PushQNet:
-    """``PushQNet`` from a model config (``recipes/conf/model/*.yaml``); sizes come from the env."""
+def make_push_qnet(cfg: Mapping, *, vocab_size: int, camera_distance: float, num_classes: int = 20) -> PushQNet:
+    """``PushQNet`` from a model config (``recipes/conf/trunk/*.yaml``); sizes come from the env and dataset."""
     cfg = dict(cfg)
-    unknown = set(cfg) - QNET_OPTIONS - {"name", "masked"}
+    unknown = set(cfg) - QNET_OPTIONS - LOADED_BY_RECIPE
     if unknown:
-        raise ValueError(f"unknown model config keys {sorted(unknown)}; allowed: {sorted(QNET_OPTIONS | {'name', 'masked'})}")
+        raise ValueError(f"unknown model config keys {sorted(unknown)}; allowed: {sorted(QNET_OPTIONS | LOADED_BY_RECIPE)}")
     kwargs = {k: (tuple(v) if isinstance(v, list) else v) for k, v in cfg.items() if k in QNET_OPTIONS}
-    return PushQNet(vocab_size, camera_distance=camera_distance, **kwargs)
+    return PushQNet(vocab_size, camera_distance=camera_distance, num_classes=num_classes, **kwargs)
 
 
 def make_q_actor(net: PushQNet, action_spec, masked: bool = True) -> QValueActor:

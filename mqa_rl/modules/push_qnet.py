@@ -26,6 +26,14 @@ are), ``light_downsample`` (the light trunk on a 2×2-averaged image), ``film`` 
 scaling and shifting the visual channels (FiLM) before the concatenation, ``target_head`` a 1×1 conv from
 the state (and a hidden layer) to one map that learns where the question's targets are visible (an auxiliary task trained
 on the simulator's segmentation, ``mqa_rl.losses.target_map``; the Q values never read it).
+
+``class_map`` (recognition made explicit; pretrain it with ``recipes/pretrain_push_trunk.py``): a 1×1
+``class_head`` on the rgb trunk gives per-cell class probabilities p [B, 1 + classes, 28, 28] (channel 0:
+no object), the question gives an attention w over the classes (softmax of a linear map of its
+feature), and the map of the question's targets, t = Σ_c w_c p_c, joins the state as one more channel.
+Recognition is then learnt once from the segmentation of a few thousand renders (the paper relied on
+ImageNet features for it) and the DQN learns only where to push given t and depth; with it,
+``target_logits`` is logit(t), so the auxiliary target-map loss trains the question's attention.
 """
 
 from __future__ import annotations
@@ -86,6 +94,8 @@ class PushQNet(nn.Module):
         freeze_trunk: bool = False,
         target_head: bool = False,
         film: bool = False,
+        class_map: bool = False,
+        num_classes: int = 20,
     ):
         super().__init__()
         self.trunk_name = trunk
@@ -102,7 +112,10 @@ class PushQNet(nn.Module):
         self.fuse = _conv_stack([feat, *fuse_channels])
         self.question = QuestionEncoder(vocab_size, out=question_dim)
         self.coords = coords
-        state = fuse_channels[-1] + question_dim + (2 if coords else 0)
+        state = fuse_channels[-1] + question_dim + (2 if coords else 0) + (1 if class_map else 0)
+        self.num_classes = int(num_classes)
+        self.class_head = nn.Conv2d(self.rgb_trunk.out_channels, 1 + self.num_classes, 1) if class_map else None
+        self.question_classes = nn.Linear(question_dim, 1 + self.num_classes) if class_map else None
         if head_context:      # 1×1 down to head_channels[0], then 3×3 convs at that width
             width = head_channels[0]
             context = [nn.Conv2d(state, width, 1), nn.ReLU(inplace=True)]
@@ -115,7 +128,7 @@ class PushQNet(nn.Module):
         # the asked-about class" is one multiplication away; concatenation alone is additive at 1x1.
         self.film = nn.Linear(question_dim, 2 * fuse_channels[-1]) if film else None
         self.target_head = nn.Sequential(nn.Conv2d(state, head_channels[0], 1), nn.ReLU(inplace=True),
-                                         nn.Conv2d(head_channels[0], 1, 1)) if target_head else None
+                                         nn.Conv2d(head_channels[0], 1, 1)) if target_head and not class_map else None
         self.register_buffer("rgb_mean", torch.tensor(IMAGENET_MEAN).view(1, 3, 1, 1) if self.imagenet_input
                              else torch.full((1, 3, 1, 1), 0.5))
         self.register_buffer("rgb_std", torch.tensor(IMAGENET_STD).view(1, 3, 1, 1) if self.imagenet_input
@@ -146,13 +159,34 @@ class PushQNet(nn.Module):
         return feat
 
     # ------------------------------------------------------------------------------------ forward
-    def state(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor) -> torch.Tensor:
-        """[B, C, 28, 28]: visual features, the tiled question feature (and coordinates)."""
-        x, h = self.normalise(rgb, depth)
-        fr = self._grid(self.rgb_trunk(self._align(x)))
+    def _rgb_features(self, rgb: torch.Tensor) -> torch.Tensor:
+        x = (rgb.to(torch.float32) / 255.0 - self.rgb_mean) / self.rgb_std
+        return self._grid(self.rgb_trunk(self._align(x)))
+
+    def class_logits(self, rgb: torch.Tensor) -> torch.Tensor:
+        """[B, 1 + classes, 28, 28] per-cell class logits from rgb alone (``class_map``)."""
+        if self.class_head is None:
+            raise RuntimeError("this PushQNet has no class head: build it with class_map=True")
+        return self.class_head(self._rgb_features(rgb))
+
+    def _targets(self, fr: torch.Tensor, qf: torch.Tensor) -> torch.Tensor:
+        """t = Σ_c softmax(question)_c · softmax(class logits)_c, [B, 1, 28, 28]."""
+        weights = torch.softmax(self.question_classes(qf), -1)[:, :, None, None]
+        return (weights * torch.softmax(self.class_head(fr), 1)).sum(1, keepdim=True)
+
+    def _features(self, rgb, depth, question):
+        _, h = self.normalise(rgb, depth)
+        fr = self._rgb_features(rgb)
         fd = self._grid(self.depth_trunk(self._align(h)))
-        visual = self.fuse(torch.cat([fr, fd], 1))
         qf = self.question(question)
+        return fr, fd, qf, (self._targets(fr, qf) if self.class_head is not None else None)
+
+    def state(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor) -> torch.Tensor:
+        """[B, C, 28, 28]: visual features, the tiled question feature (coordinates, the targets' map)."""
+        return self._state(*self._features(rgb, depth, question))
+
+    def _state(self, fr, fd, qf, targets) -> torch.Tensor:
+        visual = self.fuse(torch.cat([fr, fd], 1))
         if self.film is not None:
             gamma, beta = self.film(qf)[:, :, None, None].chunk(2, dim=1)
             visual = torch.relu(visual * (1 + gamma) + beta)
@@ -162,6 +196,8 @@ class PushQNet(nn.Module):
             lin = torch.linspace(-1, 1, actions.GRID, device=visual.device)
             yy, xx = torch.meshgrid(lin, lin, indexing="ij")
             parts.append(torch.stack([xx, yy]).expand(visual.shape[0], -1, -1, -1))
+        if targets is not None:
+            parts.append(targets)
         return torch.cat(parts, 1)
 
     def q_map(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor) -> torch.Tensor:
@@ -169,7 +205,11 @@ class PushQNet(nn.Module):
         return self.head(self.state(rgb, depth, question))
 
     def target_logits(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor) -> torch.Tensor:
-        """[B, 28, 28] logits of "a target of this question is visible in the cell" (``target_head``)."""
+        """[B, 28, 28] logits of "a target of this question is visible in the cell" (``target_head``, or
+        logit(t) of the class map)."""
+        if self.class_head is not None:       # rgb and question only: the depth trunk plays no part
+            targets = self._targets(self._rgb_features(rgb), self.question(question))
+            return torch.logit(targets.clamp(1e-4, 1 - 1e-4)).squeeze(1)
         if self.target_head is None:
             raise RuntimeError("this PushQNet has no target head: build it with target_head=True")
         return self.target_head(self.state(rgb, depth, question)).squeeze(1)

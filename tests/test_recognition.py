@@ -1,0 +1,167 @@
+"""Pretrained recognition for the push Q-network: per-cell class labels from the env, the class-map
+state channel, the pretraining loss, the recognition file, and the recipe chain pretrain → train_dqn."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from mqa_rl import keys
+from mqa_rl.envs import actions
+from mqa_rl.losses.class_cells import ClassCellsLoss
+from mqa_rl.modules.pretrained_recognition import load_recognition, save_recognition
+from mqa_rl.modules.push_qnet import PushQNet
+from torch_threads import one_torch_thread  # noqa: F401  (autouse)
+
+ROOT = Path(__file__).parents[1]
+ENV = {**os.environ, "PYTHONPATH": str(ROOT), "WANDB_MODE": "offline", "WANDB_SILENT": "true"}
+VOCAB, L, S, CLASSES = 30, 8, 224, 5
+SMALL = dict(light_channels=(8, 8, 16, 16), light_downsample=2, fuse_channels=(16, 8), head_channels=(8,))
+
+
+def _net(**kw):
+    return PushQNet(VOCAB, camera_distance=0.9, class_map=True, num_classes=CLASSES, **{**SMALL, **kw})
+
+
+def _obs(batch=2, seed=0):
+    g = torch.Generator().manual_seed(seed)
+    return (torch.randint(0, 256, (batch, 3, S, S), dtype=torch.uint8, generator=g),
+            0.8 + 0.1 * torch.rand(batch, 1, S, S, generator=g), torch.randint(1, VOCAB, (batch, L), generator=g))
+
+
+def test_class_cells_partition_every_cell_and_contain_the_target_cells(small_dataset):
+    from mqa_rl.envs.sapien_bin import SapienBinEnv
+
+    env = SapienBinEnv(small_dataset, split="train", difficulties=["hard"], seed=3)
+    td = env.reset()
+    for step in range(2):
+        cells = env.class_cells()
+        assert cells.shape == (1 + len(small_dataset.classes), actions.GRID, actions.GRID)
+        np.testing.assert_allclose(cells.sum(0), 1.0, atol=1e-5)           # every pixel: one class or none
+        assert (cells[1:].sum() > 50) and (cells[0].sum() > 50)           # objects and floor both seen
+        asked = [1 + small_dataset.classes.index(c) for c in env.question.classes]
+        np.testing.assert_allclose(cells[asked].sum(0), td[keys.TARGET_CELLS].numpy(), atol=1e-6)
+        td = env.step(td.set(keys.ACTION, torch.tensor(int(td[keys.ACTION_MASK][:-1].nonzero()[40]))))["next"]
+
+
+def test_class_map_joins_the_state_as_the_questions_attended_class_probabilities():
+    net = _net()
+    rgb, depth, q = _obs()
+    plain = PushQNet(VOCAB, camera_distance=0.9, **SMALL)
+    assert net.state(rgb, depth, q).shape[1] == plain.state(rgb, depth, q).shape[1] + 1
+    fr = net._grid(net.rgb_trunk(net._align(net.normalise(rgb, depth)[0])))
+    w = torch.softmax(net.question_classes(net.question(q)), -1)
+    expected = (w[:, :, None, None] * torch.softmax(net.class_head(fr), 1)).sum(1)
+    torch.testing.assert_close(net.state(rgb, depth, q)[:, -1], expected)
+    torch.testing.assert_close(torch.sigmoid(net.target_logits(rgb, depth, q)), expected.clamp(1e-4, 1 - 1e-4))
+    torch.testing.assert_close(net.class_logits(rgb), net.class_head(fr))
+    assert net(rgb, depth, q).shape == (2, actions.NUM_ACTIONS)
+
+
+def _coloured_cells(batch, seed):
+    """Images whose 8×8 cells each show one of CLASSES flat colours or grey floor, with their labels."""
+    g = torch.Generator().manual_seed(seed)
+    labels = torch.randint(0, 1 + CLASSES, (batch, actions.GRID, actions.GRID), generator=g)
+    palette = torch.tensor([[128, 128, 128], [230, 30, 30], [30, 200, 30], [30, 30, 230], [220, 220, 20], [200, 20, 200]],
+                           dtype=torch.uint8)
+    rgb = palette[labels].permute(0, 3, 1, 2).repeat_interleave(8, -2).repeat_interleave(8, -1)
+    cells = torch.nn.functional.one_hot(labels, 1 + CLASSES).permute(0, 3, 1, 2).to(torch.float16)
+    from tensordict import TensorDict
+
+    return TensorDict({keys.RGB: rgb.contiguous(), keys.CLASS_CELLS: cells}, batch_size=[batch])
+
+
+def test_class_cells_loss_learns_colours_and_reports_accuracy():
+    torch.manual_seed(0)
+    net = _net()
+    loss = ClassCellsLoss(net)
+    batch = _coloured_cells(4, 0)
+    first = loss(batch)
+    optim = torch.optim.Adam([*net.rgb_trunk.parameters(), *net.class_head.parameters()], lr=3e-3)
+    for _ in range(60):
+        td = loss(batch)
+        optim.zero_grad()
+        td["loss_class_cells"].backward()
+        optim.step()
+    last = loss(batch)
+    assert last["loss_class_cells"] < 0.5 * first["loss_class_cells"]
+    assert last["cell_accuracy"] > 0.8 and last["target_iou"] > 0.5 > first["target_iou"]
+    with pytest.raises(ValueError, match="class_map=True"):
+        ClassCellsLoss(PushQNet(VOCAB, camera_distance=0.9, **SMALL))
+    bad = batch.clone().set(keys.CLASS_CELLS, batch[keys.CLASS_CELLS][:, :3])
+    with pytest.raises(ValueError, match="labelled for 2 classes"):
+        loss(bad)
+
+
+def test_recognition_file_round_trip_freezes_and_refuses_what_does_not_fit(tmp_path):
+    classes = [f"c{i}" for i in range(CLASSES)]
+    source = _net()
+    path = save_recognition(source, tmp_path / "rec.pt", classes, {"step": 7})
+    assert not list(tmp_path.glob(".rec.pt.tmp*"))                     # written atomically
+    net = _net()
+    assert load_recognition(net, path, classes) == {"step": 7}
+    for a, b in zip(source.rgb_trunk.state_dict().values(), net.rgb_trunk.state_dict().values()):
+        assert torch.equal(a, b)
+    assert torch.equal(source.class_head.weight, net.class_head.weight)
+    assert not any(p.requires_grad for p in (*net.rgb_trunk.parameters(), *net.class_head.parameters()))
+    assert all(p.requires_grad for p in (*net.depth_trunk.parameters(), *net.question.parameters()))
+    assert torch.equal(source.question_classes.weight, net.question_classes.weight)
+    assert all(p.requires_grad for p in _net().class_head.parameters())  # freeze=False leaves them trainable
+    with pytest.raises(FileNotFoundError, match="pretrain_push_trunk.py"):
+        load_recognition(_net(), tmp_path / "missing.pt", classes)
+    with pytest.raises(ValueError, match="another dataset"):
+        load_recognition(_net(), path, list(reversed(classes)))
+    with pytest.raises(ValueError, match="light_channels"):
+        load_recognition(_net(light_channels=(8, 8, 16, 32)), path, classes)
+    with pytest.raises(ValueError, match="class_map=true"):
+        load_recognition(PushQNet(VOCAB, camera_distance=0.9, **SMALL), path, classes)
+    visual_only = torch.load(path, weights_only=True)         # a file without the question part loads too
+    for name in ("question", "question_classes"):
+        visual_only.pop(name)
+    visual_only["architecture"].pop("question_shapes")
+    torch.save(visual_only, tmp_path / "visual.pt")
+    fresh = _net()
+    before = fresh.question_classes.weight.clone()
+    load_recognition(fresh, tmp_path / "visual.pt", classes)
+    assert torch.equal(fresh.question_classes.weight, before) and torch.equal(fresh.class_head.weight, source.class_head.weight)
+    truncated = tmp_path / "truncated.pt"
+    truncated.write_bytes(path.read_bytes()[:1000])
+    with pytest.raises(ValueError, match="truncated"):
+        load_recognition(_net(), truncated, classes)
+
+
+@pytest.mark.timeout(900)
+def test_pretrain_then_train_dqn_from_the_recognition_file(small_dataset_dir, tmp_path):
+    rec = tmp_path / "rec"
+    args = [str(ROOT / "recipes" / "pretrain_push_trunk.py"), f"dataset={small_dataset_dir}", f"out_dir={rec}",
+            "frames.count=24", "frames.max_pushes=3", "train.steps=4", "train.eval_interval=2", "train.batch_size=4",
+            "question.steps=300",
+            "logger.wandb=false", "logger.progress=false", "threads=1"]
+    out = subprocess.run([sys.executable, *args], capture_output=True, text=True, timeout=600, env=ENV, cwd=tmp_path)
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert "collected 24 frames" in out.stdout and (rec / "recognition.pt").exists()
+    summary = json.loads((rec / "summary.json").read_text())
+    assert summary["question"]["question/accuracy"] > 0.9     # which class a question asks about: learnt
+    again = subprocess.run([sys.executable, *args], capture_output=True, text=True, timeout=600, env=ENV, cwd=tmp_path)
+    assert again.returncode == 0 and "collected" not in again.stdout       # the cached frames are reused
+    blob = torch.load(rec / "recognition.pt", weights_only=True)
+    run = tmp_path / "run"
+    out = subprocess.run([sys.executable, str(ROOT / "recipes" / "train_dqn.py"), "profile=smoke", f"dataset={small_dataset_dir}",
+                          f"out_dir={run}", "threads=1", "model.class_map=true", f"model.pretrained={rec / 'recognition.pt'}",
+                          "loss.target_map_weight=1.0"], capture_output=True, text=True, timeout=600, env=ENV, cwd=tmp_path)
+    assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-3000:]
+    assert "done: {'frames': 32" in out.stdout
+    # the frozen recognition is unchanged by DQN training, and the trained policy loads for evaluation
+    from mqa_rl.envs.sapien_bin import SapienBinEnv
+    from mqa_rl.modules.trained_policy import load_greedy
+
+    actor, _, _ = load_greedy(run, None, SapienBinEnv(small_dataset_dir, split="test"))
+    net = actor.module[0].module if hasattr(actor.module[0], "module") else None
+    net = next(m for m in actor.modules() if isinstance(m, PushQNet)) if net is None else net
+    for name, value in blob["class_head"].items():
+        assert torch.equal(net.class_head.state_dict()[name], value)
