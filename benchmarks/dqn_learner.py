@@ -46,6 +46,7 @@ VOCAB, QLEN, SIZE = 120, 14, 224
 CONF = Path(__file__).parents[1] / "recipes" / "conf" / "trunk"
 MODELS = {p.stem: dict(OmegaConf.to_container(OmegaConf.load(p))) for p in sorted(CONF.glob("*.yaml"))}   # the recipe's
 MODELS["light_full_res"] = {**MODELS["light"], "light_downsample": 1}                                     # for comparison
+MODELS["light_recognition"] = {**MODELS["light"], "class_map": True}        # profile=cpu_recognition: rgb trunk frozen
 
 
 def fake_transitions(n: int, gen: torch.Generator) -> TensorDict:
@@ -62,7 +63,9 @@ def fake_transitions(n: int, gen: torch.Generator) -> TensorDict:
     nxt = obs()
     nxt.update({keys.REWARD: torch.randn(n, 1, generator=gen), "done": torch.zeros(n, 1, dtype=torch.bool),
                 "terminated": torch.zeros(n, 1, dtype=torch.bool), "truncated": torch.zeros(n, 1, dtype=torch.bool)})
-    return TensorDict({**obs(), keys.ACTION: allowed[torch.randint(len(allowed), (n,), generator=gen)], "next": nxt}, [n])
+    td = TensorDict({**obs(), keys.ACTION: allowed[torch.randint(len(allowed), (n,), generator=gen)], "next": nxt}, [n])
+    td.set(keys.TARGET_CELLS, torch.rand(n, actions.GRID, actions.GRID, generator=gen))   # stored for the auxiliary loss
+    return td
 
 
 def time_update(model: dict, batch: int, repeats: int) -> tuple[float, float]:
@@ -70,9 +73,12 @@ def time_update(model: dict, batch: int, repeats: int) -> tuple[float, float]:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         net = make_push_qnet(model, vocab_size=VOCAB, camera_distance=0.9)
+    if model.get("class_map") and model.get("pretrained_frozen", True):     # as after load_recognition
+        for p in (*net.rgb_trunk.parameters(), *net.class_head.parameters()):
+            p.requires_grad_(False)
     actor = make_q_actor(net, Categorical(actions.NUM_ACTIONS))
     loss, updater = make_dqn_loss(actor, {"gamma": 0.6, "function": "huber"})
-    opt = torch.optim.Adam(loss.parameters(), lr=1e-4)
+    opt = torch.optim.Adam([p for p in loss.parameters() if p.requires_grad], lr=1e-4)
     gen = torch.Generator().manual_seed(0)
     data = compact_transitions(fake_transitions(batch, gen))
     data.set("priority_weight", torch.ones(batch))
@@ -143,7 +149,7 @@ def mask_effect(dataset: str, pushes: int) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--trunks", nargs="+", default=["light", "light_full_res", "resnet18", "resnet101"])
+    ap.add_argument("--trunks", nargs="+", default=["light", "light_recognition", "light_full_res", "resnet18", "resnet101"])
     ap.add_argument("--batch", nargs="+", type=int, default=[16])
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--threads", type=int, default=torch.get_num_threads())

@@ -24,6 +24,7 @@ import random  # noqa: E402
 import shutil  # noqa: E402
 import signal  # noqa: E402
 import time  # noqa: E402
+import warnings  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import hydra
@@ -33,6 +34,7 @@ from omegaconf import DictConfig, OmegaConf
 from tqdm import tqdm
 
 from mqa_rl import keys
+from mqa_rl.collectors.demonstrations import load_demonstrations
 from mqa_rl.collectors.factory import make_collector, running
 from mqa_rl.envs.factory import make_mqa_env
 from mqa_rl.envs.qmap_overlay import qmap_episode_frames, qmap_image
@@ -41,6 +43,8 @@ from mqa_rl.evaluation.episode_metrics import episode_metrics, summarise
 from mqa_rl.evaluation.rollouts import run_episodes
 from mqa_rl.losses.dqn import make_dqn_loss
 from mqa_rl.losses.replay import annealed_is_beta, compact_transitions, make_replay_buffer
+from mqa_rl.losses.augment import DihedralAugment
+from mqa_rl.losses.demonstration import LargeMarginLoss
 from mqa_rl.losses.target_map import TargetMapLoss
 from mqa_rl.modules.pretrained_recognition import load_recognition
 from mqa_rl.modules.push_policy import make_explorer, make_push_qnet, make_q_actor
@@ -72,6 +76,34 @@ def check_config(cfg: DictConfig) -> None:
     if not Path(cfg.dataset).exists():
         raise FileNotFoundError(f"dataset {cfg.dataset} does not exist: make it with recipes/make_dataset.py "
                                 f"or point dataset=... at one")
+
+
+DEMO_METRICS = ("loss_margin", "demo_agreement", "demo_near")
+
+
+def pretrain_on_demonstrations(state, updates, demo_batch, demo_loss, aux_loss, optim, params, target_updater, cfg, logger):
+    """DQfD's pre-training phase: margin (and target-map) updates on the demonstrations alone, then the
+    target network takes the pretrained weights. Counted in ``state`` (a resumed run does not repeat it)."""
+    window = []
+    while state["demo_pretrain_updates"] < updates:
+        batch = demo_batch()
+        td = demo_loss(batch)
+        total = td["loss_margin"] + (aux_loss(batch)["loss_target_map"] if aux_loss is not None else 0.0)
+        optim.zero_grad()
+        total.backward()
+        torch.nn.utils.clip_grad_norm_(params, cfg.optim.max_grad_norm)
+        optim.step()
+        state["demo_pretrain_updates"] += 1
+        window.append([td[k].item() for k in DEMO_METRICS])
+        if state["demo_pretrain_updates"] % 50 == 0 or state["demo_pretrain_updates"] == updates:
+            means = dict(zip(DEMO_METRICS, np.mean(window, 0)))
+            logger.log_metrics({f"demo_pretrain/{k}": float(v) for k, v in means.items()}, step=state["demo_pretrain_updates"])
+            print(f"demonstration pre-training {state['demo_pretrain_updates']}/{updates}: "
+                  + ", ".join(f"{k} {v:.3f}" for k, v in means.items()), flush=True)
+            window = []
+    with warnings.catch_warnings():             # the target network starts from the pretrained weights
+        warnings.simplefilter("ignore")
+        target_updater.init_()
 
 
 def learner_device(name: str) -> torch.device:
@@ -140,6 +172,15 @@ def train(cfg: DictConfig) -> dict:
     loss, target_updater = make_dqn_loss(actor, cfg.loss)
     aux_weight = float(cfg.loss.get("target_map_weight", 0.0))
     aux_loss = TargetMapLoss(net, aux_weight) if aux_weight > 0 else None
+    demo_cfg = cfg.get("demos") or {}
+    demos = load_demonstrations(demo_cfg["path"], cfg.dataset) if demo_cfg.get("path") else None
+    demo_loss = LargeMarginLoss(net, demo_cfg["margin"], demo_cfg["weight"]) if demos is not None else None
+    demo_augment = DihedralAugment() if buf.get("augment", "none") == "dihedral" else None
+
+    def demo_batch():
+        batch = demos[torch.randint(len(demos), (int(demo_cfg["batch_size"]),))].clone()
+        return (demo_augment.forward(batch) if demo_augment is not None else batch).to(device)
+
     params = [p for p in loss.parameters() if p.requires_grad]
     optim = torch.optim.Adam(params, lr=cfg.optim.lr, weight_decay=cfg.optim.weight_decay)
     scratch = Path(buf.scratch_dir) if buf.scratch_dir else out / "replay_scratch"
@@ -148,7 +189,7 @@ def train(cfg: DictConfig) -> dict:
     rb = make_replay_buffer(buf, scratch)
 
     # ---- state and checkpoint
-    state = {"frames": 0, "updates": 0, "episodes": 0, "next_eval": int(cfg.eval.interval_frames),
+    state = {"frames": 0, "updates": 0, "episodes": 0, "demo_pretrain_updates": 0, "next_eval": int(cfg.eval.interval_frames),
              "next_checkpoint": int(cfg.checkpoint.interval_frames), "train_seconds": 0.0}
     ckpt = TrainingCheckpoint(out / "checkpoints", actor=actor, loss=loss, optimizer=optim, replay_buffer=rb,
                               egreedy=egreedy, target_updater=target_updater, beta_counter=counter, state=state,
@@ -171,6 +212,9 @@ def train(cfg: DictConfig) -> dict:
     logger = RunLogger(out, wandb=cfg.logger.wandb, project=cfg.logger.project,
                        exp_name=f"dqn_{cfg.reward.name}_{cfg.model.trunk}", config=config)
 
+    if demos is not None and state["demo_pretrain_updates"] < int(demo_cfg["pretrain_updates"]):
+        pretrain_on_demonstrations(state, int(demo_cfg["pretrain_updates"]), demo_batch, demo_loss, aux_loss, optim, params,
+                                   target_updater, cfg, logger)
     total = int(col.total_frames)
     remaining = total - state["frames"]
     if remaining > 0:
@@ -202,7 +246,7 @@ def train(cfg: DictConfig) -> dict:
                 # ---- updates
                 t0 = time.perf_counter()
                 if state["frames"] >= col.learning_starts and len(rb) >= buf.batch_size:
-                    losses, qs, aux_terms = [], [], []
+                    losses, qs, aux_terms, demo_terms = [], [], [], []
                     for _ in range(cfg.loss.updates_per_batch):
                         sample = rb.sample().to(device)
                         out_td = loss(sample)
@@ -211,6 +255,10 @@ def train(cfg: DictConfig) -> dict:
                             aux_td = aux_loss(sample)
                             total_loss = total_loss + aux_td["loss_target_map"]
                             aux_terms.append((aux_td["loss_target_map"].item(), aux_td["target_map_iou"].item()))
+                        if demo_loss is not None:
+                            demo_td = demo_loss(demo_batch())
+                            total_loss = total_loss + demo_td["loss_margin"]
+                            demo_terms.append([demo_td[k].item() for k in DEMO_METRICS])
                         optim.zero_grad()
                         total_loss.backward()
                         torch.nn.utils.clip_grad_norm_(params, cfg.optim.max_grad_norm)
@@ -228,6 +276,8 @@ def train(cfg: DictConfig) -> dict:
                                         "time/updates_per_s": len(losses) / max(time.perf_counter() - t0, 1e-9)})
                     if aux_terms:
                         metrics["train/target_map_loss"], metrics["train/target_map_iou"] = map(float, np.mean(aux_terms, 0))
+                    if demo_terms:
+                        metrics.update({f"train/{k}": float(v) for k, v in zip(DEMO_METRICS, np.mean(demo_terms, 0))})
                 if acting is not explore:
                     acting.load_state_dict(explore.state_dict())
                 collector.update_policy_weights_()

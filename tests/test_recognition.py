@@ -1,5 +1,6 @@
 """Pretrained recognition for the push Q-network: per-cell class labels from the env, the class-map
-state channel, the pretraining loss, the recognition file, and the recipe chain pretrain → train_dqn."""
+state channel, the pretraining loss, the recognition file, and the recipe chain pretrain → demonstrations
+→ train_dqn."""
 
 import json
 import os
@@ -150,12 +151,19 @@ def test_pretrain_then_train_dqn_from_the_recognition_file(small_dataset_dir, tm
     again = subprocess.run([sys.executable, *args], capture_output=True, text=True, timeout=600, env=ENV, cwd=tmp_path)
     assert again.returncode == 0 and "collected" not in again.stdout       # the cached frames are reused
     blob = torch.load(rec / "recognition.pt", weights_only=True)
+    demos = tmp_path / "demos"                                  # and the oracle's demonstrations (DQfD)
+    out = subprocess.run([sys.executable, str(ROOT / "recipes" / "collect_demonstrations.py"), f"dataset={small_dataset_dir}",
+                          f"out_dir={demos}", "states=6", "progress=false", "env.max_pushes=3"],
+                         capture_output=True, text=True, timeout=600, env=ENV, cwd=tmp_path)
+    assert out.returncode == 0 and "6 demonstrations" in out.stdout, out.stderr[-3000:]
     run = tmp_path / "run"
     out = subprocess.run([sys.executable, str(ROOT / "recipes" / "train_dqn.py"), "profile=smoke", f"dataset={small_dataset_dir}",
                           f"out_dir={run}", "threads=1", "model.class_map=true", f"model.pretrained={rec / 'recognition.pt'}",
-                          "loss.target_map_weight=1.0"], capture_output=True, text=True, timeout=600, env=ENV, cwd=tmp_path)
+                          "loss.target_map_weight=1.0", f"demos.path={demos}", "demos.pretrain_updates=3", "demos.batch_size=4",
+                          "buffer.augment=dihedral"], capture_output=True, text=True, timeout=600, env=ENV, cwd=tmp_path)
     assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-3000:]
-    assert "done: {'frames': 32" in out.stdout
+    assert "done: {'frames': 32" in out.stdout and "demonstration pre-training 3/3" in out.stdout
+    assert (run / "csv" / "scalars" / "train" / "demo_agreement.csv").exists()
     # the frozen recognition is unchanged by DQN training, and the trained policy loads for evaluation
     from mqa_rl.envs.sapien_bin import SapienBinEnv
     from mqa_rl.modules.trained_policy import load_greedy

@@ -76,6 +76,8 @@ class DihedralAugment(Transform):
                 continue
             idx = (picks == g).nonzero().squeeze(-1)
             for prefix in ((), ("next",)):
+                if prefix and "next" not in flat.keys():         # demonstrations: states without successors
+                    continue
                 for key in IMAGE_KEYS:
                     name = (*prefix, key)
                     flat.get(name)[idx] = transform_images(flat.get(name)[idx], k, mirror)

@@ -1,0 +1,57 @@
+"""DQfD's large-margin loss on demonstrations (Hester et al. 2018), beside TorchRL's ``DQNLoss``.
+
+    J_E = max_a [Q(s, a) + l(a_E, a)] − Q(s, a_E),   l = ``margin`` for a ≠ a_E, 0 for a = a_E
+
+over the actions the state's mask allows: the demonstrated action must out-value every other one by
+the margin, which makes the greedy policy imitate the demonstrator where the TD targets say nothing
+yet, while the TD loss keeps the values consistent with the rewards. Demonstrated actions that the
+mask forbids (rare: an oracle push starting over a wall) are left out.
+"""
+
+from __future__ import annotations
+
+import torch
+from tensordict import TensorDict, TensorDictBase
+from torchrl.objectives import LossModule
+
+from mqa_rl import keys
+from mqa_rl.envs import actions
+
+
+class LargeMarginLoss(LossModule):
+    """Writes ``loss_margin`` (weighted) and for the logs ``demo_agreement`` (the greedy action is the
+    demonstrated one) and ``demo_near`` (same direction, start within 2 grid cells; or both stop)."""
+
+    def __init__(self, net: torch.nn.Module, margin: float = 0.5, weight: float = 1.0):
+        super().__init__()
+        if not (margin > 0 and weight > 0):
+            raise ValueError(f"the demonstration margin and weight must be > 0, got {margin} and {weight}")
+        self.net, self.margin, self.weight = net, float(margin), float(weight)
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDict:
+        q = self.net(tensordict.get(keys.RGB), tensordict.get(keys.DEPTH), tensordict.get(keys.QUESTION))
+        mask = tensordict.get(keys.ACTION_MASK)
+        demo = tensordict.get(keys.ACTION).reshape(-1)
+        ok = mask.gather(-1, demo[:, None]).squeeze(-1)
+        if not ok.any():
+            zero = q.sum() * 0.0
+            return TensorDict({"loss_margin": zero, "demo_agreement": zero.detach(), "demo_near": zero.detach()}, [])
+        q, mask, demo = q[ok], mask[ok], demo[ok]
+        bonus = torch.full_like(q, self.margin).scatter(-1, demo[:, None], 0.0)
+        best = (q + bonus).masked_fill(~mask, torch.finfo(q.dtype).min).max(-1).values
+        loss = (best - q.gather(-1, demo[:, None]).squeeze(-1)).mean()
+        with torch.no_grad():
+            greedy = q.masked_fill(~mask, torch.finfo(q.dtype).min).argmax(-1)
+            agree = (greedy == demo).float().mean()
+            near = _near(greedy, demo).float().mean()
+        return TensorDict({"loss_margin": self.weight * loss, "demo_agreement": agree, "demo_near": near}, [])
+
+
+def _near(a: torch.Tensor, b: torch.Tensor, cells: int = 2) -> torch.Tensor:
+    stop_a, stop_b = a == actions.STOP, b == actions.STOP
+    a, b = a.clamp(max=actions.NUM_PUSHES - 1), b.clamp(max=actions.NUM_PUSHES - 1)
+    per = actions.GRID * actions.GRID
+    same_dir = a // per == b // per
+    ra, ca, rb, cb = (a % per) // actions.GRID, a % actions.GRID, (b % per) // actions.GRID, b % actions.GRID
+    close = ((ra - rb).abs() <= cells) & ((ca - cb).abs() <= cells)
+    return (stop_a & stop_b) | (~stop_a & ~stop_b & same_dir & close)

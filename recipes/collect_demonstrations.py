@@ -1,0 +1,68 @@
+"""Collect the privileged oracle's demonstrations on the train split, for DQN from demonstrations.
+
+    python recipes/collect_demonstrations.py                     # 2,000 states -> runs/demos
+    python recipes/train_dqn.py profile=cpu_recognition demos.path=runs/demos ...
+
+The oracle reads the simulator (which target is hidden, which object covers it); the states it meets
+and its actions are stored as the replay stores observations (``mqa_rl.collectors.demonstrations``).
+Writes ``out_dir/data`` (a memmap TensorDict) and ``out_dir/demos.json`` (settings, dataset
+fingerprint, action statistics), both renamed into place at the end: a killed run leaves nothing
+half-written.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import time
+from collections import Counter
+from pathlib import Path
+
+import hydra
+import torch
+from omegaconf import DictConfig, OmegaConf
+
+from mqa_rl import keys
+from mqa_rl.collectors.demonstrations import DEMOS_META, collect_demonstrations
+from mqa_rl.collectors.rollouts import dataset_fingerprint
+from mqa_rl.envs import actions
+from mqa_rl.envs.sapien_bin import SapienBinEnv
+
+def collect(cfg: DictConfig) -> dict:
+    out = Path(cfg.out_dir)
+    if (out / DEMOS_META).exists():
+        raise FileExistsError(f"{out} already holds demonstrations: choose another out_dir or delete it")
+    if not Path(cfg.dataset).exists():
+        raise FileNotFoundError(f"dataset {cfg.dataset} does not exist: make it with recipes/make_dataset.py")
+    torch.manual_seed(cfg.seed)
+    env = SapienBinEnv(cfg.dataset, seed=cfg.seed, **OmegaConf.to_container(cfg.env))
+    t0 = time.perf_counter()
+    demos = collect_demonstrations(env, cfg.states, progress=cfg.progress, **OmegaConf.to_container(cfg.oracle))
+    seconds = time.perf_counter() - t0
+    act = demos.get(keys.ACTION)
+    allowed = demos.get(keys.ACTION_MASK).gather(-1, act[:, None]).squeeze(-1)
+    meta = {**OmegaConf.to_container(cfg, resolve=True), "dataset_sha256": dataset_fingerprint(cfg.dataset),
+            "seconds": round(seconds, 1), "stop_fraction": float((act == actions.STOP).float().mean()),
+            "masked_fraction": float((~allowed).float().mean()),
+            "directions": dict(Counter((act[act != actions.STOP] // (actions.GRID ** 2)).tolist()))}
+    tmp = out.with_name(f".{out.name}.tmp{os.getpid()}")
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    demos.memmap(tmp / "data")
+    (tmp / DEMOS_META).write_text(json.dumps(meta, indent=1))
+    if out.exists():                       # an empty or unfinished folder (no demos.json)
+        shutil.rmtree(out)
+    os.replace(tmp, out)
+    print(f"{len(demos)} demonstrations in {seconds:.0f} s -> {out}: stop {meta['stop_fraction']:.2f}, "
+          f"masked {meta['masked_fraction']:.3f}")
+    return meta
+
+
+@hydra.main(config_path="conf", config_name="collect_demonstrations", version_base="1.3")
+def main(cfg: DictConfig) -> None:
+    collect(cfg)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,84 @@
+"""DQN from demonstrations: the oracle's states and actions, DQfD's large-margin loss, the recipe."""
+
+import json
+
+import pytest
+import torch
+from tensordict import TensorDict
+
+from mqa_rl import keys
+from mqa_rl.envs import actions
+from mqa_rl.losses.augment import DihedralAugment, transform_action
+from mqa_rl.losses.demonstration import LargeMarginLoss
+from mqa_rl.modules.push_qnet import PushQNet
+from torch_threads import one_torch_thread  # noqa: F401  (autouse)
+
+VOCAB, L, S = 30, 8, 224
+SMALL = dict(light_channels=(8, 8, 16, 16), light_downsample=2, fuse_channels=(16, 8), head_channels=(8,), head_context=1)
+
+
+def _demos(n=4, seed=0):
+    g = torch.Generator().manual_seed(seed)
+    mask = torch.ones(n, actions.NUM_ACTIONS, dtype=torch.bool)
+    mask[:, :100] = False                                           # some pushes forbidden
+    return TensorDict({keys.RGB: torch.randint(0, 256, (n, 3, S, S), dtype=torch.uint8, generator=g),
+                       keys.DEPTH: (0.8 + 0.1 * torch.rand(n, 1, S, S, generator=g)).half(),
+                       keys.QUESTION: torch.randint(1, VOCAB, (n, L), generator=g), keys.ACTION_MASK: mask,
+                       keys.TARGET_CELLS: torch.rand(n, actions.GRID, actions.GRID, generator=g).half(),
+                       keys.ACTION: torch.tensor([1000, 2500, actions.STOP, 4000][:n])}, [n])
+
+
+def test_margin_loss_teaches_the_demonstrated_actions_and_skips_masked_ones():
+    torch.manual_seed(0)
+    net = PushQNet(VOCAB, camera_distance=0.9, **SMALL)
+    loss = LargeMarginLoss(net, margin=0.5)
+    demos = _demos()
+    first = loss(demos)
+    optim = torch.optim.Adam(net.parameters(), lr=3e-3)
+    for _ in range(80):
+        td = loss(demos)
+        optim.zero_grad()
+        td["loss_margin"].backward()
+        optim.step()
+    last = loss(demos)
+    assert last["loss_margin"] < 0.1 * first["loss_margin"]
+    assert last["demo_agreement"] == 1.0 and last["demo_near"] == 1.0 and first["demo_agreement"] < 1.0
+    with torch.no_grad():                      # the demonstrated action out-values every other allowed one
+        q = net(demos[keys.RGB], demos[keys.DEPTH], demos[keys.QUESTION]).masked_fill(~demos[keys.ACTION_MASK], -1e9)
+        assert torch.equal(q.argmax(-1), demos[keys.ACTION])
+    masked = demos.clone()
+    masked[keys.ACTION] = torch.tensor([5, 6, 7, 8])                 # all forbidden by the mask: nothing to learn
+    out = loss(masked)
+    assert out["loss_margin"].item() == 0.0
+    with pytest.raises(ValueError, match="margin and weight"):
+        LargeMarginLoss(net, margin=0.0)
+
+
+def test_dihedral_augment_turns_demonstrations_without_successor_states():
+    demos = _demos()
+    g = torch.Generator().manual_seed(1)
+    out = DihedralAugment(generator=g).forward(demos.clone())
+    picks = torch.randint(0, 8, (4,), generator=torch.Generator().manual_seed(1))
+    for i, p in enumerate(picks.tolist()):
+        expect = transform_action(demos[keys.ACTION][i:i + 1], p % 4, p >= 4)
+        assert out[keys.ACTION][i] == expect[0]
+
+
+def test_oracle_demonstrations_are_collected_and_refused_when_they_do_not_fit(small_dataset, small_dataset_dir, tmp_path):
+    from mqa_rl.collectors.demonstrations import DEMO_KEYS, DEMOS_META, collect_demonstrations, load_demonstrations
+    from mqa_rl.envs.sapien_bin import SapienBinEnv
+
+    env = SapienBinEnv(small_dataset, split="train", difficulties=["hard"], seed=0)
+    demos = collect_demonstrations(env, 5, progress=False)
+    assert demos.shape == (5,) and all(k in demos.keys(True) for k in DEMO_KEYS)
+    assert demos[keys.DEPTH].dtype == torch.float16 and demos[keys.RGB].dtype == torch.uint8
+    pushes = demos[keys.ACTION][demos[keys.ACTION] != actions.STOP]
+    assert len(pushes) >= 3                                  # hard scenes: the oracle pushes occluders away
+    with pytest.raises(FileNotFoundError, match="collect_demonstrations.py"):
+        load_demonstrations(tmp_path / "none")
+    folder = tmp_path / "demos"
+    demos.memmap(folder / "data")
+    (folder / DEMOS_META).write_text(json.dumps({"dataset_sha256": "something else"}))
+    with pytest.raises(ValueError, match="another dataset"):
+        load_demonstrations(folder, small_dataset_dir)
+    assert torch.equal(load_demonstrations(folder)[keys.ACTION], demos[keys.ACTION])
