@@ -44,7 +44,7 @@ from mqa_rl.evaluation.rollouts import run_episodes
 from mqa_rl.losses.dqn import make_dqn_loss
 from mqa_rl.losses.replay import annealed_is_beta, compact_transitions, make_replay_buffer
 from mqa_rl.losses.augment import DihedralAugment
-from mqa_rl.losses.demonstration import LargeMarginLoss
+from mqa_rl.losses.demonstration import DemonstrationLoss
 from mqa_rl.losses.target_map import TargetMapLoss
 from mqa_rl.modules.pretrained_recognition import load_recognition
 from mqa_rl.modules.push_policy import make_explorer, make_push_qnet, make_q_actor
@@ -78,7 +78,7 @@ def check_config(cfg: DictConfig) -> None:
                                 f"or point dataset=... at one")
 
 
-DEMO_METRICS = ("loss_margin", "demo_agreement", "demo_near")
+DEMO_METRICS = ("loss_demo", "demo_agreement", "demo_near")
 
 
 def pretrain_on_demonstrations(state, updates, demo_batch, demo_loss, aux_loss, optim, params, target_updater, cfg, logger):
@@ -88,7 +88,7 @@ def pretrain_on_demonstrations(state, updates, demo_batch, demo_loss, aux_loss, 
     while state["demo_pretrain_updates"] < updates:
         batch = demo_batch()
         td = demo_loss(batch)
-        total = td["loss_margin"] + (aux_loss(batch)["loss_target_map"] if aux_loss is not None else 0.0)
+        total = td["loss_demo"] + (aux_loss(batch)["loss_target_map"] if aux_loss is not None else 0.0)
         optim.zero_grad()
         total.backward()
         torch.nn.utils.clip_grad_norm_(params, cfg.optim.max_grad_norm)
@@ -174,7 +174,8 @@ def train(cfg: DictConfig) -> dict:
     aux_loss = TargetMapLoss(net, aux_weight) if aux_weight > 0 else None
     demo_cfg = cfg.get("demos") or {}
     demos = load_demonstrations(demo_cfg["path"], cfg.dataset) if demo_cfg.get("path") else None
-    demo_loss = LargeMarginLoss(net, demo_cfg["margin"], demo_cfg["weight"]) if demos is not None else None
+    demo_loss = (DemonstrationLoss(net, demo_cfg.get("loss", "margin"), demo_cfg["margin"], demo_cfg["weight"])
+                 if demos is not None else None)
     demo_augment = DihedralAugment() if buf.get("augment", "none") == "dihedral" else None
 
     def demo_batch():
@@ -257,7 +258,7 @@ def train(cfg: DictConfig) -> dict:
                             aux_terms.append((aux_td["loss_target_map"].item(), aux_td["target_map_iou"].item()))
                         if demo_loss is not None:
                             demo_td = demo_loss(demo_batch())
-                            total_loss = total_loss + demo_td["loss_margin"]
+                            total_loss = total_loss + demo_td["loss_demo"]
                             demo_terms.append([demo_td[k].item() for k in DEMO_METRICS])
                         optim.zero_grad()
                         total_loss.backward()

@@ -9,7 +9,7 @@ from tensordict import TensorDict
 from mqa_rl import keys
 from mqa_rl.envs import actions
 from mqa_rl.losses.augment import DihedralAugment, transform_action
-from mqa_rl.losses.demonstration import LargeMarginLoss
+from mqa_rl.losses.demonstration import DemonstrationLoss
 from mqa_rl.modules.push_qnet import PushQNet
 from torch_threads import one_torch_thread  # noqa: F401  (autouse)
 
@@ -31,17 +31,17 @@ def _demos(n=4, seed=0):
 def test_margin_loss_teaches_the_demonstrated_actions_and_skips_masked_ones():
     torch.manual_seed(0)
     net = PushQNet(VOCAB, camera_distance=0.9, **SMALL)
-    loss = LargeMarginLoss(net, margin=0.5)
+    loss = DemonstrationLoss(net, margin=0.5)
     demos = _demos()
     first = loss(demos)
     optim = torch.optim.Adam(net.parameters(), lr=3e-3)
     for _ in range(80):
         td = loss(demos)
         optim.zero_grad()
-        td["loss_margin"].backward()
+        td["loss_demo"].backward()
         optim.step()
     last = loss(demos)
-    assert last["loss_margin"] < 0.1 * first["loss_margin"]
+    assert last["loss_demo"] < 0.1 * first["loss_demo"]
     assert last["demo_agreement"] == 1.0 and last["demo_near"] == 1.0 and first["demo_agreement"] < 1.0
     with torch.no_grad():                      # the demonstrated action out-values every other allowed one
         q = net(demos[keys.RGB], demos[keys.DEPTH], demos[keys.QUESTION]).masked_fill(~demos[keys.ACTION_MASK], -1e9)
@@ -49,9 +49,9 @@ def test_margin_loss_teaches_the_demonstrated_actions_and_skips_masked_ones():
     masked = demos.clone()
     masked[keys.ACTION] = torch.tensor([5, 6, 7, 8])                 # all forbidden by the mask: nothing to learn
     out = loss(masked)
-    assert out["loss_margin"].item() == 0.0
+    assert out["loss_demo"].item() == 0.0
     with pytest.raises(ValueError, match="margin and weight"):
-        LargeMarginLoss(net, margin=0.0)
+        DemonstrationLoss(net, margin=0.0)
 
 
 def test_dihedral_augment_turns_demonstrations_without_successor_states():
@@ -82,3 +82,28 @@ def test_oracle_demonstrations_are_collected_and_refused_when_they_do_not_fit(sm
     with pytest.raises(ValueError, match="another dataset"):
         load_demonstrations(folder, small_dataset_dir)
     assert torch.equal(load_demonstrations(folder)[keys.ACTION], demos[keys.ACTION])
+
+
+def test_push_cross_entropy_learns_demonstrated_pushes_and_leaves_stops_to_td():
+    torch.manual_seed(0)
+    net = PushQNet(VOCAB, camera_distance=0.9, **SMALL)
+    loss = DemonstrationLoss(net, kind="push_cross_entropy")
+    demos = _demos()                                   # one of the four demonstrations is a stop
+    first = loss(demos)
+    optim = torch.optim.Adam(net.parameters(), lr=3e-3)
+    for _ in range(60):
+        td = loss(demos)
+        optim.zero_grad()
+        td["loss_demo"].backward()
+        optim.step()
+    assert loss(demos)["loss_demo"] < 0.2 * first["loss_demo"]
+    with torch.no_grad():
+        q = net(demos[keys.RGB], demos[keys.DEPTH], demos[keys.QUESTION])
+        pushes = demos[keys.ACTION] != actions.STOP
+        allowed = demos[keys.ACTION_MASK].clone()
+        allowed[:, actions.STOP] = False
+        assert torch.equal(q.masked_fill(~allowed, -1e9).argmax(-1)[pushes], demos[keys.ACTION][pushes])
+    only_stops = demos[2:3]
+    assert loss(only_stops)["loss_demo"].item() == 0.0
+    with pytest.raises(ValueError, match="unknown demonstration loss"):
+        DemonstrationLoss(net, kind="bc")
