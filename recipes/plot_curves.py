@@ -44,7 +44,9 @@ def label(run: Path) -> str:
         from omegaconf import OmegaConf
 
         c = OmegaConf.load(cfg)
-        return f"DQN ({c.reward.name}, {c.model.trunk})"
+        extras = [name for name, on in (("recognition", c.model.get("class_map")), ("demonstrations", (c.get("demos") or {}).get("path")),
+                                        ("no mask", not c.get("action_mask", True))) if on]
+        return f"DQN ({c.reward.name}, {c.model.trunk}{''.join(', ' + e for e in extras)}): {run.name}"
     return run.name
 
 
