@@ -33,7 +33,7 @@ from mqa_rl.modules.trained_policy import load_greedy
 from mqa_rl.modules.random_policy import RandomMQAPolicy
 
 KINDS = ("random", "random_masked", "none", "dqn", "privileged")
-PRIVILEGED_OPTIONS = ("min_visible_px", "min_visible_fraction", "max_tries_per_occluder", "lookahead")
+PRIVILEGED_OPTIONS = ("min_visible_px", "min_visible_fraction", "max_tries_per_occluder", "lookahead", "order")
 
 
 class StopPolicy(TensorDictModuleBase):

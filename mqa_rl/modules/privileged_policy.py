@@ -9,6 +9,8 @@ target's full silhouette in the segmentation, and pushes that occluder straight 
 target: the push starts just behind the occluder's visible part on the target's side and runs
 through it. When every target is revealed (or nothing covers the hidden ones, or every
 occluder was already pushed ``max_tries_per_occluder`` times without success) it stops.
+``order="visible_first"`` serves the partly visible targets first (most visible first), then the
+hidden ones: a teacher whose choices an image policy can see (``recipes/collect_demonstrations.py``).
 """
 
 from __future__ import annotations
@@ -23,6 +25,9 @@ from mqa_rl import keys
 from mqa_rl.envs import actions
 
 
+ORDERS = ("least_visible", "visible_first")
+
+
 class PrivilegedPushPolicy:
     """Oracle push policy bound to one ``SapienBinEnv`` (it reads ``env.ground_truth()``).
 
@@ -31,13 +36,17 @@ class PrivilegedPushPolicy:
     """
 
     def __init__(self, env, min_visible_px: int = 20, min_visible_fraction: float = 0.3,
-                 max_tries_per_occluder: int = 2, finger_gap_px: float = 3.0, lookahead: int = 6):
+                 max_tries_per_occluder: int = 2, finger_gap_px: float = 3.0, lookahead: int = 6,
+                 order: str = "least_visible"):
         self.env = env
         self.min_visible_px = min_visible_px
         self.min_visible_fraction = min_visible_fraction
         self.max_tries_per_occluder = max_tries_per_occluder
         self.finger_gap_px = finger_gap_px
         self.lookahead = lookahead
+        if order not in ORDERS:
+            raise ValueError(f"unknown target order {order!r}; choose one of {ORDERS}")
+        self.order = order
         self._tries: dict[tuple[int, int], int] = {}
         self._episode = None
 
@@ -75,7 +84,11 @@ class PrivilegedPushPolicy:
         each object covering it (most pixels first), pushed straight away from it and ±45°."""
         seg, masks, ids = gt["seg"], gt["masks"], gt["entity_ids"]
         targets = np.flatnonzero(gt["target"] & ~self.revealed(gt["visible"], gt["full"]))
-        order = targets[np.argsort(gt["visible"][targets] / np.maximum(gt["full"][targets], 1))]
+        seen_frac = gt["visible"][targets] / np.maximum(gt["full"][targets], 1)
+        if self.order == "least_visible":
+            order = targets[np.argsort(seen_frac)]
+        else:                   # partly visible targets first, the most visible first: what an image shows
+            order = targets[np.argsort(np.where(gt["visible"][targets] > 0, -seen_frac, 1.0), kind="stable")]
         out, seen = [], set()
         for t in order:
             covered = seg[masks[t]]
