@@ -45,6 +45,7 @@ from mqa_rl.collectors.class_frames import collect_class_frames  # noqa: E402
 from mqa_rl.collectors.rollouts import dataset_fingerprint  # noqa: E402
 from mqa_rl.data import MQADataset  # noqa: E402
 from mqa_rl.envs.sapien_bin import SapienBinEnv  # noqa: E402
+from mqa_rl.evaluation.answering_report import write_atomic  # noqa: E402
 from mqa_rl.losses.class_cells import ClassCellsLoss  # noqa: E402
 from mqa_rl.modules.pretrained_recognition import load_recognition, save_recognition  # noqa: E402
 from mqa_rl.modules.push_policy import make_push_qnet  # noqa: E402
@@ -221,9 +222,7 @@ def pretrain(cfg: DictConfig) -> dict:
     summary = {"steps": int(t.steps), "train_frames": len(train_frames), "val_frames": len(val_frames),
                "visual_seconds": round(visual_seconds, 1), "question_seconds": round(time.perf_counter() - t0 - visual_seconds, 1),
                "best": best, "question": question, "file": str(out / RECOGNITION_FILE)}
-    tmp = out / f".summary.json.tmp{os.getpid()}"
-    tmp.write_text(json.dumps(summary, indent=1))
-    os.replace(tmp, out / "summary.json")
+    write_atomic(out / "summary.json", json.dumps(summary, indent=1))
     print("done:", summary)
     return summary
 
