@@ -16,7 +16,6 @@ import os
 
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")      # see train_dqn.py: idle threads must not spin
 
-import signal  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import hydra  # noqa: E402
@@ -24,10 +23,7 @@ from omegaconf import DictConfig, OmegaConf  # noqa: E402
 
 from mqa_rl.collectors.rollouts import collect_split  # noqa: E402
 from mqa_rl.modules.frozen_policies import system_spec  # noqa: E402
-
-
-def _sigterm_to_exit(signum, frame):          # finished episodes are flushed to disk on the way out
-    raise SystemExit(f"terminated by signal {signum}")
+from mqa_rl.training.signals import exit_on_sigterm  # noqa: E402
 
 
 def collect(cfg: DictConfig) -> list[dict]:
@@ -47,7 +43,7 @@ def collect(cfg: DictConfig) -> list[dict]:
 
 @hydra.main(config_path="conf", config_name="collect_rollouts", version_base="1.3")
 def main(cfg: DictConfig) -> None:
-    signal.signal(signal.SIGTERM, _sigterm_to_exit)
+    exit_on_sigterm()
     collect(cfg)
 
 

@@ -12,7 +12,6 @@ smoothed with a moving average over ``--window`` points; testing: the greedy eva
 from __future__ import annotations
 
 import argparse
-import os
 from pathlib import Path
 
 import matplotlib
@@ -20,6 +19,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+
+from mqa_rl.evaluation.answering_report import save_figure  # noqa: E402
 
 
 def read_scalar(run: Path, name: str) -> tuple[np.ndarray, np.ndarray]:
@@ -67,12 +68,7 @@ def plot(runs: list[Path], out: Path, window: int = 10) -> Path:
         ax.grid(alpha=0.3)
         ax.legend()
     fig.tight_layout()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.stem}.tmp{os.getpid()}{out.suffix}")
-    fig.savefig(tmp, dpi=120)
-    plt.close(fig)
-    os.replace(tmp, out)
-    return out
+    return save_figure(fig, out)
 
 
 def main() -> None:

@@ -29,7 +29,6 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")      # see train_dqn.py: idl
 import json  # noqa: E402
 import random  # noqa: E402
 import shutil  # noqa: E402
-import signal  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -50,13 +49,10 @@ from mqa_rl.losses.class_cells import ClassCellsLoss  # noqa: E402
 from mqa_rl.modules.pretrained_recognition import load_recognition, save_recognition  # noqa: E402
 from mqa_rl.modules.push_policy import make_push_qnet  # noqa: E402
 from mqa_rl.training.run_logger import RunLogger  # noqa: E402
+from mqa_rl.training.signals import exit_on_sigterm  # noqa: E402
 from mqa_rl.training.vqa_data import DIHEDRAL, dihedral, scene_split  # noqa: E402
 
 RECOGNITION_FILE = "recognition.pt"
-
-
-def _sigterm_to_exit(signum, frame):
-    raise SystemExit(f"terminated by signal {signum}")
 
 
 def labelled_frames(cfg: DictConfig, dataset: MQADataset, out: Path) -> TensorDict:
@@ -229,7 +225,7 @@ def pretrain(cfg: DictConfig) -> dict:
 
 @hydra.main(config_path="conf", config_name="pretrain_push_trunk", version_base="1.3")
 def main(cfg: DictConfig) -> None:
-    signal.signal(signal.SIGTERM, _sigterm_to_exit)
+    exit_on_sigterm()
     pretrain(cfg)
 
 

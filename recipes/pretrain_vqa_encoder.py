@@ -19,7 +19,6 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")      # see train_dqn.py: idl
 
 import json  # noqa: E402
 import random  # noqa: E402
-import signal  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -34,17 +33,15 @@ from tqdm import tqdm  # noqa: E402
 from mqa_rl import keys  # noqa: E402
 from mqa_rl.collectors.rollouts import dataset_fingerprint  # noqa: E402
 from mqa_rl.data import MQADataset  # noqa: E402
+from mqa_rl.evaluation.answering_report import write_atomic  # noqa: E402
 from mqa_rl.losses.encoder_pretraining import EncoderPretrainLoss  # noqa: E402
 from mqa_rl.modules.vqa_encoder import FrameEncoder, PretrainHeads, save_encoder  # noqa: E402
 from mqa_rl.training.model_checkpoint import ModelCheckpoint  # noqa: E402
 from mqa_rl.training.run_logger import RunLogger, trim_scalars  # noqa: E402
+from mqa_rl.training.signals import exit_on_sigterm  # noqa: E402
 from mqa_rl.training.vqa_data import DIHEDRAL, dihedral, pretraining_frames, scene_split  # noqa: E402
 
 ENCODER_FILE = "encoder.pt"
-
-
-def _sigterm_to_exit(signum, frame):
-    raise SystemExit(f"terminated by signal {signum}")
 
 
 def augment(batch: TensorDict) -> TensorDict:
@@ -163,16 +160,14 @@ def pretrain(cfg: DictConfig) -> dict:
     summary = {"steps": int(t.steps), "train_frames": len(train_frames), "val_frames": len(val_frames),
                "best_val_loss": state["best_val"] if len(val_frames) else None, "best_step": state["best_step"],
                "train_seconds": round(state["train_seconds"], 1), "encoder": str(out / ENCODER_FILE)}
-    tmp = out / f".summary.json.tmp{os.getpid()}"
-    tmp.write_text(json.dumps(summary, indent=1))
-    os.replace(tmp, out / "summary.json")
+    write_atomic(out / "summary.json", json.dumps(summary, indent=1))
     print("done:", summary)
     return summary
 
 
 @hydra.main(config_path="conf", config_name="pretrain_vqa_encoder", version_base="1.3")
 def main(cfg: DictConfig) -> None:
-    signal.signal(signal.SIGTERM, _sigterm_to_exit)
+    exit_on_sigterm()
     pretrain(cfg)
 
 

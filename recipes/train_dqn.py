@@ -22,7 +22,6 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 import copy  # noqa: E402
 import random  # noqa: E402
 import shutil  # noqa: E402
-import signal  # noqa: E402
 import time  # noqa: E402
 import warnings  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -41,19 +40,16 @@ from mqa_rl.envs.qmap_overlay import qmap_episode_frames, qmap_image
 from mqa_rl.envs.video import write_video
 from mqa_rl.evaluation.episode_metrics import episode_metrics, summarise
 from mqa_rl.evaluation.rollouts import run_episodes
-from mqa_rl.losses.dqn import make_dqn_loss
-from mqa_rl.losses.replay import annealed_is_beta, compact_transitions, make_replay_buffer
 from mqa_rl.losses.augment import DihedralAugment
 from mqa_rl.losses.demonstration import DemonstrationLoss
+from mqa_rl.losses.dqn import make_dqn_loss
+from mqa_rl.losses.replay import annealed_is_beta, compact_transitions, make_replay_buffer
 from mqa_rl.losses.target_map import TargetMapLoss
 from mqa_rl.modules.pretrained_recognition import load_recognition
 from mqa_rl.modules.push_policy import make_explorer, make_push_qnet, make_q_actor
 from mqa_rl.training.checkpoint import TrainingCheckpoint
 from mqa_rl.training.run_logger import RunLogger, trim_scalars
-
-
-def _sigterm_to_exit(signum, frame):          # so that `running()` shuts the workers down on `kill`
-    raise SystemExit(f"terminated by signal {signum}")
+from mqa_rl.training.signals import exit_on_sigterm
 
 
 def check_config(cfg: DictConfig) -> None:
@@ -311,7 +307,7 @@ def train(cfg: DictConfig) -> dict:
 
 @hydra.main(config_path="conf", config_name="train_dqn", version_base="1.3")
 def main(cfg: DictConfig) -> None:
-    signal.signal(signal.SIGTERM, _sigterm_to_exit)
+    exit_on_sigterm()
     train(cfg)
 
 

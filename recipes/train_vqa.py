@@ -20,7 +20,6 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")      # see train_dqn.py: idl
 
 import json  # noqa: E402
 import random  # noqa: E402
-import signal  # noqa: E402
 import time  # noqa: E402
 import warnings  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -31,24 +30,21 @@ import torch  # noqa: E402
 from omegaconf import DictConfig, OmegaConf  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
-from mqa_rl.evaluation.answering_report import write_atomic  # noqa: E402
 from mqa_rl import keys  # noqa: E402
 from mqa_rl.collectors.rollouts import dataset_fingerprint  # noqa: E402
 from mqa_rl.collectors.store import read_meta  # noqa: E402
 from mqa_rl.data import MQADataset  # noqa: E402
 from mqa_rl.data.dataset import LEVELS  # noqa: E402
+from mqa_rl.evaluation.answering_report import write_atomic  # noqa: E402
 from mqa_rl.losses.vqa import VQALoss  # noqa: E402
 from mqa_rl.modules.vqa import CHECKPOINT_NAME, VQAModel, save_vqa, vqa_module  # noqa: E402
 from mqa_rl.modules.vqa_encoder import load_encoder  # noqa: E402
 from mqa_rl.training.model_checkpoint import ModelCheckpoint  # noqa: E402
 from mqa_rl.training.run_logger import RunLogger, trim_scalars  # noqa: E402
+from mqa_rl.training.signals import exit_on_sigterm  # noqa: E402
 from mqa_rl.training.vqa_data import DIHEDRAL, Batches, encode_store, load_answering_records, scene_split  # noqa: E402
 
 MODEL_OPTIONS = ("pool", "image_size", "dim", "lstm_layers", "dropout", "cell_heads")
-
-
-def _sigterm_to_exit(signum, frame):
-    raise SystemExit(f"terminated by signal {signum}")
 
 
 def check_config(cfg: DictConfig) -> None:
@@ -218,7 +214,7 @@ def train(cfg: DictConfig) -> dict:
 
 @hydra.main(config_path="conf", config_name="train_vqa", version_base="1.3")
 def main(cfg: DictConfig) -> None:
-    signal.signal(signal.SIGTERM, _sigterm_to_exit)
+    exit_on_sigterm()
     train(cfg)
 
 

@@ -28,6 +28,16 @@ def write_atomic(path: Path, text: str | bytes) -> Path:
     return path
 
 
+def save_figure(fig, path: Path, dpi: int = 120) -> Path:
+    """A matplotlib figure to ``path`` (format from its suffix), written atomically, then closed."""
+    import matplotlib.pyplot as plt
+
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format=path.suffix.lstrip(".") or "png", dpi=dpi)
+    plt.close(fig)
+    return write_atomic(path, buffer.getvalue())
+
+
 def _acc(cell: dict | None) -> str:
     if not cell or cell["n"] == 0:
         return "—"
@@ -176,9 +186,4 @@ def table3_figure(results: dict, path: Path, qtype: str = "counting") -> Path:
     ax.grid(axis="y", alpha=0.3)
     ax.legend(fontsize=7, ncol=2)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}{path.suffix}")
-    fig.savefig(tmp, dpi=120)
-    plt.close(fig)
-    os.replace(tmp, path)
-    return path
+    return save_figure(fig, path)

@@ -137,10 +137,15 @@ class PushQNet(nn.Module):
     # ------------------------------------------------------------------------------------ inputs
     def normalise(self, rgb: torch.Tensor, depth: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """uint8 rgb → standardised float; depth (m, any float dtype) → height above floor / depth_scale."""
-        x = (rgb.to(torch.float32) / 255.0 - self.rgb_mean) / self.rgb_std
+        return self._standardise(rgb), self._height(depth)
+
+    def _standardise(self, rgb: torch.Tensor) -> torch.Tensor:
+        return (rgb.to(torch.float32) / 255.0 - self.rgb_mean) / self.rgb_std
+
+    def _height(self, depth: torch.Tensor) -> torch.Tensor:
         d = depth.to(torch.float32)
         h = torch.where(d > 0, (self.camera_distance - d) / self.depth_scale, torch.zeros_like(d))
-        return x, h.expand(-1, self.depth_channels, -1, -1)
+        return h.expand(-1, self.depth_channels, -1, -1)
 
     def _align(self, x: torch.Tensor) -> torch.Tensor:
         """Shift the image up-left so that feature cell (r, c) centres on grid cell (r, c).
@@ -160,8 +165,7 @@ class PushQNet(nn.Module):
 
     # ------------------------------------------------------------------------------------ forward
     def _rgb_features(self, rgb: torch.Tensor) -> torch.Tensor:
-        x = (rgb.to(torch.float32) / 255.0 - self.rgb_mean) / self.rgb_std
-        return self._grid(self.rgb_trunk(self._align(x)))
+        return self._grid(self.rgb_trunk(self._align(self._standardise(rgb))))
 
     def class_logits(self, rgb: torch.Tensor) -> torch.Tensor:
         """[B, 1 + classes, 28, 28] per-cell class logits from rgb alone (``class_map``)."""
@@ -175,9 +179,8 @@ class PushQNet(nn.Module):
         return (weights * torch.softmax(self.class_head(fr), 1)).sum(1, keepdim=True)
 
     def _features(self, rgb, depth, question):
-        _, h = self.normalise(rgb, depth)
         fr = self._rgb_features(rgb)
-        fd = self._grid(self.depth_trunk(self._align(h)))
+        fd = self._grid(self.depth_trunk(self._align(self._height(depth))))
         qf = self.question(question)
         return fr, fd, qf, (self._targets(fr, qf) if self.class_head is not None else None)
 
