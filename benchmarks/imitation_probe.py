@@ -8,6 +8,7 @@ inside the mask: the base rate, printed first).
 
     python benchmarks/imitation_probe.py --loss ce_push --steps 1000        # cross-entropy over pushes
     python benchmarks/imitation_probe.py --loss margin --steps 1000         # DQfD's large margin
+    python benchmarks/imitation_probe.py --demos runs/demos_image --smooth 1.5   # a soft target around the push
 """
 
 from __future__ import annotations
@@ -68,6 +69,7 @@ def main() -> None:
     ap.add_argument("--lr", type=float, default=1e-3)
     ap.add_argument("--val", type=int, default=250)
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--smooth", type=float, default=0.0, help="ce_push: Gaussian spread of the target in grid cells")
     args = ap.parse_args()
     torch.manual_seed(0)
     torch.set_num_threads(args.threads)
@@ -84,14 +86,13 @@ def main() -> None:
     load_recognition(net, args.recognition, ds.classes)
     optim = torch.optim.Adam([p for p in net.parameters() if p.requires_grad], lr=args.lr)
     margin, augment, t0 = DemonstrationLoss(net), DihedralAugment(), time.perf_counter()
+    ce = DemonstrationLoss(net, "push_cross_entropy", smooth_cells=args.smooth)
     for step in range(1, args.steps + 1):
         batch = augment.forward(train[torch.randint(len(train), (16,))].clone())
         if args.loss == "margin":
             loss = margin(batch)["loss_demo"]
         else:
-            batch, allowed = push_only(batch)
-            q = net(batch[keys.RGB], batch[keys.DEPTH], batch[keys.QUESTION])
-            loss = F.cross_entropy(q.masked_fill(~allowed, torch.finfo(q.dtype).min), batch[keys.ACTION])
+            loss = ce(batch)["loss_demo"]
         optim.zero_grad()
         loss.backward()
         optim.step()

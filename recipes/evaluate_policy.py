@@ -3,6 +3,7 @@
     python recipes/evaluate_policy.py run=outputs/train_dqn/local/2026-11-22_09-00-00
     python recipes/evaluate_policy.py run=... policies=[greedy] episodes_per_level=3 video_episodes=3
     python recipes/evaluate_policy.py run=... pusher=arm      # the same policy pushing with the Panda arm
+    python recipes/evaluate_policy.py run=... 'policies=[greedy,random,visible_teacher]'   # + its teacher
 
 Per level and policy, over the same questions (the env is seeded alike for every policy): mean
 episode reward, pushes, fraction of episodes ending in a simple scene, change of the targets' mean
@@ -31,9 +32,13 @@ from mqa_rl.envs.video import write_video
 from mqa_rl.evaluation.answering_report import write_atomic
 from mqa_rl.evaluation.episode_metrics import mean_ci95
 from mqa_rl.evaluation.rollouts import run_episodes
+from mqa_rl.modules.privileged_policy import PrivilegedPushPolicy
 from mqa_rl.modules.random_policy import RandomMQAPolicy
 from mqa_rl.modules.trained_policy import load_greedy
 
+# References that read the simulator (never a learned policy): the least-visible-first oracle, and the
+# teacher of profile=cpu_visible_teacher (only targets the image shows a part of).
+ORACLES = {"oracle": {}, "visible_teacher": {"order": "visible_first", "image_visible": True}}
 REPORTED = ("reward", "pushes", "final_simple", "chi_end", "chi_change", "hidden_end", "stopped")
 
 
@@ -95,8 +100,11 @@ def main(cfg: DictConfig) -> None:
                         write_video(frames, out / "videos" / f"{level}_{i}.{cfg.video_format}")
             elif name in ("random", "random_masked"):
                 policy = RandomMQAPolicy(max_pushes, seed=cfg.seed, masked=name == "random_masked")
+            elif name in ORACLES:
+                policy = PrivilegedPushPolicy(env.base_env, lookahead=1, **ORACLES[name])
             else:
-                raise ValueError(f"unknown policy {name!r}; choose among greedy, random, random_masked")
+                raise ValueError(f"unknown policy {name!r}; choose among greedy, random, random_masked, "
+                                 + ", ".join(ORACLES))
             m = reused if reused is not None else run_episodes(
                 env, policy, cfg.episodes_per_level, max_pushes=max_pushes, simple_threshold=threshold, on_episode=on_episode)
             buffer = io.BytesIO()

@@ -131,3 +131,50 @@ def test_visible_first_oracle_serves_partly_visible_targets_first(small_dataset)
     assert checked >= 1
     with pytest.raises(ValueError, match="unknown target order"):
         PrivilegedPushPolicy(env, order="random")
+
+
+def test_smoothed_push_target_spreads_over_nearby_allowed_starts_of_the_same_direction():
+    from mqa_rl.losses.demonstration import smoothed_push_target
+
+    demo = torch.tensor([actions.encode(3, 10, 12), actions.encode(0, 0, 0)])
+    allowed = torch.ones(2, actions.NUM_ACTIONS, dtype=torch.bool)
+    allowed[0, actions.encode(3, 10, 13)] = False
+    target = smoothed_push_target(demo, allowed, sigma=1.0)
+    assert torch.allclose(target.sum(-1), torch.ones(2))
+    assert target[0].argmax() == demo[0] and target[0, actions.encode(3, 10, 13)] == 0
+    assert target[0, actions.encode(3, 11, 12)] > 0.5 * target[0, demo[0]]         # one cell off: nearly as good
+    assert target[0, actions.encode(3, 20, 12)] < 1e-6                               # across the bin: not
+    assert target[0, actions.encode(2, 10, 12)] == 0 and target[:, actions.STOP].eq(0).all()
+    torch.manual_seed(0)
+    net = PushQNet(VOCAB, camera_distance=0.9, **SMALL)
+    demos = _demos()
+    loss = DemonstrationLoss(net, kind="push_cross_entropy", smooth_cells=1.0)
+    optim = torch.optim.Adam(net.parameters(), lr=3e-3)
+    first = loss(demos)["loss_demo"].item()
+    for _ in range(60):
+        td = loss(demos)
+        optim.zero_grad()
+        td["loss_demo"].backward()
+        optim.step()
+    assert torch.isfinite(td["loss_demo"]) and td["loss_demo"].item() < first
+    assert td["demo_near"].item() == 1.0
+    with pytest.raises(ValueError, match="smooth_cells"):
+        DemonstrationLoss(net, kind="push_cross_entropy", smooth_cells=-1)
+
+
+def test_image_visible_oracle_only_serves_targets_the_image_shows(small_dataset):
+    from mqa_rl.envs.sapien_bin import SapienBinEnv
+    from mqa_rl.modules.privileged_policy import PrivilegedPushPolicy
+
+    env = SapienBinEnv(small_dataset, split="train", difficulties=["hard"], seed=0)
+    served = 0
+    for _ in range(6):
+        env.reset()
+        gt = env.ground_truth()
+        policy = PrivilegedPushPolicy(env, lookahead=1, order="visible_first", image_visible=True)
+        candidates = policy.candidates(gt)
+        assert all(gt["visible"][t] > 0 for _, (t, _) in candidates)
+        served += len(candidates)
+        if not candidates:
+            assert policy.choose() == actions.STOP
+    assert served > 0

@@ -32,13 +32,17 @@ class DemonstrationLoss(LossModule):
     """Writes ``loss_demo`` (weighted) and for the logs ``demo_agreement`` (the greedy action is the
     demonstrated one) and ``demo_near`` (same direction, start within 2 grid cells; or both stop)."""
 
-    def __init__(self, net: torch.nn.Module, kind: str = "margin", margin: float = 0.5, weight: float = 1.0):
+    def __init__(self, net: torch.nn.Module, kind: str = "margin", margin: float = 0.5, weight: float = 1.0,
+                 smooth_cells: float = 0.0):
         super().__init__()
         if kind not in KINDS:
             raise ValueError(f"unknown demonstration loss {kind!r}; choose one of {KINDS}")
         if not (margin > 0 and weight > 0):
             raise ValueError(f"the demonstration margin and weight must be > 0, got {margin} and {weight}")
+        if smooth_cells < 0:
+            raise ValueError(f"smooth_cells must be ≥ 0, got {smooth_cells}")
         self.net, self.kind, self.margin, self.weight = net, kind, float(margin), float(weight)
+        self.smooth_cells = float(smooth_cells)
 
     def forward(self, tensordict: TensorDictBase) -> TensorDict:
         q = self.net(tensordict.get(keys.RGB), tensordict.get(keys.DEPTH), tensordict.get(keys.QUESTION))
@@ -58,12 +62,34 @@ class DemonstrationLoss(LossModule):
         else:
             pushes = mask.clone()
             pushes[:, actions.STOP] = False
-            loss = F.cross_entropy(q.masked_fill(~pushes, torch.finfo(q.dtype).min), demo)
+            masked = q.masked_fill(~pushes, torch.finfo(q.dtype).min)
+            if self.smooth_cells > 0:
+                target = smoothed_push_target(demo, pushes, self.smooth_cells)
+                logp = torch.where(target > 0, F.log_softmax(masked, -1), 0.0)
+                loss = -(target * logp).sum(-1).mean()
+            else:
+                loss = F.cross_entropy(masked, demo)
         with torch.no_grad():
             greedy = q.masked_fill(~mask, torch.finfo(q.dtype).min).argmax(-1)
             agree = (greedy == demo).float().mean()
             near = _near(greedy, demo).float().mean()
         return TensorDict({"loss_demo": self.weight * loss, "demo_agreement": agree, "demo_near": near}, [])
+
+
+def smoothed_push_target(demo: torch.Tensor, allowed: torch.Tensor, sigma: float) -> torch.Tensor:
+    """[N, A] distributions: the demonstrated pushes [N] spread over nearby starts in the same direction
+    (Gaussian weights of ``sigma`` grid cells), kept to the ``allowed`` [N, A] actions, summing to 1."""
+    per = actions.GRID * actions.GRID
+    d, row, col = demo // per, (demo % per) // actions.GRID, demo % actions.GRID
+    grid = torch.arange(actions.GRID, device=demo.device, dtype=torch.float32)
+    w_row = torch.exp(-(grid[None] - row[:, None]) ** 2 / (2 * sigma ** 2))
+    w_col = torch.exp(-(grid[None] - col[:, None]) ** 2 / (2 * sigma ** 2))
+    target = torch.zeros(len(demo), actions.DIRECTIONS, actions.GRID, actions.GRID, device=demo.device)
+    target[torch.arange(len(demo)), d] = w_row[:, :, None] * w_col[:, None, :]
+    target = torch.cat([target.reshape(len(demo), -1), target.new_zeros(len(demo), allowed.shape[-1] - actions.NUM_PUSHES)], -1)
+    target = target * allowed
+    target[torch.arange(len(demo)), demo] = target[torch.arange(len(demo)), demo].clamp(min=1e-6)  # never empty
+    return target / target.sum(-1, keepdim=True)
 
 
 def _near(a: torch.Tensor, b: torch.Tensor, cells: int = 2) -> torch.Tensor:

@@ -37,7 +37,7 @@ class PrivilegedPushPolicy:
 
     def __init__(self, env, min_visible_px: int = 20, min_visible_fraction: float = 0.3,
                  max_tries_per_occluder: int = 2, finger_gap_px: float = 3.0, lookahead: int = 6,
-                 order: str = "least_visible"):
+                 order: str = "least_visible", image_visible: bool = False):
         self.env = env
         self.min_visible_px = min_visible_px
         self.min_visible_fraction = min_visible_fraction
@@ -47,6 +47,7 @@ class PrivilegedPushPolicy:
         if order not in ORDERS:
             raise ValueError(f"unknown target order {order!r}; choose one of {ORDERS}")
         self.order = order
+        self.image_visible = image_visible
         self._tries: dict[tuple[int, int], int] = {}
         self._episode = None
 
@@ -84,6 +85,8 @@ class PrivilegedPushPolicy:
         each object covering it (most pixels first), pushed straight away from it and ±45°."""
         seg, masks, ids = gt["seg"], gt["masks"], gt["entity_ids"]
         targets = np.flatnonzero(gt["target"] & ~self.revealed(gt["visible"], gt["full"]))
+        if self.image_visible:          # only targets the image shows a part of
+            targets = targets[gt["visible"][targets] > 0]
         seen_frac = gt["visible"][targets] / np.maximum(gt["full"][targets], 1)
         if self.order == "least_visible":
             order = targets[np.argsort(seen_frac)]
