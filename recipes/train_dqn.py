@@ -74,7 +74,7 @@ def check_config(cfg: DictConfig) -> None:
                                 f"or point dataset=... at one")
 
 
-DEMO_METRICS = ("loss_demo", "demo_agreement", "demo_near")
+DEMO_METRICS = ("loss_demo", "demo_agreement", "demo_near", "demo_stop_agreement")
 
 
 def pretrain_on_demonstrations(state, updates, demo_batch, demo_loss, aux_loss, optim, params, target_updater, cfg, logger):
@@ -171,7 +171,7 @@ def train(cfg: DictConfig) -> dict:
     demo_cfg = cfg.get("demos") or {}
     demos = load_demonstrations(demo_cfg["path"], cfg.dataset) if demo_cfg.get("path") else None
     demo_loss = (DemonstrationLoss(net, demo_cfg.get("loss", "margin"), demo_cfg["margin"], demo_cfg["weight"],
-                                   demo_cfg.get("smooth_cells", 0.0))
+                                   demo_cfg.get("smooth_cells", 0.0), demo_cfg.get("stop_margin", 0.0))
                  if demos is not None else None)
     demo_augment = DihedralAugment() if buf.get("augment", "none") == "dihedral" else None
 

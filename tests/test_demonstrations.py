@@ -178,3 +178,22 @@ def test_image_visible_oracle_only_serves_targets_the_image_shows(small_dataset)
         if not candidates:
             assert policy.choose() == actions.STOP
     assert served > 0
+
+
+def test_stop_margin_teaches_when_the_demonstrator_stops():
+    torch.manual_seed(0)
+    net = PushQNet(VOCAB, camera_distance=0.9, **SMALL)
+    demos = _demos()                                   # the third demonstration is a stop
+    loss = DemonstrationLoss(net, kind="push_cross_entropy", smooth_cells=1.0, stop_margin=0.5)
+    optim = torch.optim.Adam(net.parameters(), lr=3e-3)
+    for _ in range(80):
+        td = loss(demos)
+        optim.zero_grad()
+        td["loss_demo"].backward()
+        optim.step()
+    assert loss(demos)["demo_stop_agreement"].item() == 1.0
+    with torch.no_grad():
+        q = net(demos[keys.RGB], demos[keys.DEPTH], demos[keys.QUESTION])
+    best_push = q[:, : actions.NUM_PUSHES].masked_fill(~demos[keys.ACTION_MASK][:, : actions.NUM_PUSHES], -1e9).max(-1).values
+    assert (q[:, actions.STOP] > best_push).tolist() == [False, False, True, False]
+    assert DemonstrationLoss(net, kind="push_cross_entropy")(demos[2:3])["loss_demo"].item() == 0.0

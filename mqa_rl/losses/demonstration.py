@@ -10,7 +10,10 @@ and on a flat Q map over ~3,500 allowed pushes the max moves every step: measure
 its plateau (loss = margin) for 1,200 updates. ``push_cross_entropy`` is the cross-entropy of the
 softmax of Q over the allowed pushes against the demonstrated push (stops are left to the TD loss:
 with stops in the softmax, the single stop action becomes the mode and the greedy policy always
-stops): a gradient on every action (``benchmarks/imitation_probe.py``). Demonstrated actions that the
+stops): a gradient on every action (``benchmarks/imitation_probe.py``). ``stop_margin`` > 0 adds DQfD's
+large margin to the one decision the cross-entropy leaves out, stop or push: in a demonstrated stop
+Q(stop) must beat the best allowed push by the margin, in a demonstrated push the best push must beat
+Q(stop) by it. Demonstrated actions that the
 mask forbids (rare: an oracle push starting over a wall) are left out.
 """
 
@@ -30,30 +33,34 @@ KINDS = ("margin", "push_cross_entropy")
 
 class DemonstrationLoss(LossModule):
     """Writes ``loss_demo`` (weighted) and for the logs ``demo_agreement`` (the greedy action is the
-    demonstrated one) and ``demo_near`` (same direction, start within 2 grid cells; or both stop)."""
+    demonstrated one; with the cross-entropy, the greedy push) and ``demo_near`` (same direction, start
+    within 2 grid cells; or both stop) and ``demo_stop_agreement`` (greedy stops where the demonstrator
+    stopped and pushes where it pushed)."""
 
     def __init__(self, net: torch.nn.Module, kind: str = "margin", margin: float = 0.5, weight: float = 1.0,
-                 smooth_cells: float = 0.0):
+                 smooth_cells: float = 0.0, stop_margin: float = 0.0):
         super().__init__()
         if kind not in KINDS:
             raise ValueError(f"unknown demonstration loss {kind!r}; choose one of {KINDS}")
         if not (margin > 0 and weight > 0):
             raise ValueError(f"the demonstration margin and weight must be > 0, got {margin} and {weight}")
-        if smooth_cells < 0:
-            raise ValueError(f"smooth_cells must be ≥ 0, got {smooth_cells}")
+        if smooth_cells < 0 or stop_margin < 0:
+            raise ValueError(f"smooth_cells and stop_margin must be ≥ 0, got {smooth_cells} and {stop_margin}")
         self.net, self.kind, self.margin, self.weight = net, kind, float(margin), float(weight)
-        self.smooth_cells = float(smooth_cells)
+        self.smooth_cells, self.stop_margin = float(smooth_cells), float(stop_margin)
 
     def forward(self, tensordict: TensorDictBase) -> TensorDict:
         q = self.net(tensordict.get(keys.RGB), tensordict.get(keys.DEPTH), tensordict.get(keys.QUESTION))
         mask = tensordict.get(keys.ACTION_MASK)
         demo = tensordict.get(keys.ACTION).reshape(-1)
         ok = mask.gather(-1, demo[:, None]).squeeze(-1)
+        stop_loss, stop_agree = self._stop_decision(q, mask, demo, ok)
         if self.kind == "push_cross_entropy":
             ok = ok & (demo != actions.STOP)
         if not ok.any():
             zero = q.sum() * 0.0
-            return TensorDict({"loss_demo": zero, "demo_agreement": zero.detach(), "demo_near": zero.detach()}, [])
+            return TensorDict({"loss_demo": self.weight * stop_loss + zero, "demo_agreement": zero.detach(),
+                               "demo_near": zero.detach(), "demo_stop_agreement": stop_agree}, [])
         q, mask, demo = q[ok], mask[ok], demo[ok]
         if self.kind == "margin":
             bonus = torch.full_like(q, self.margin).scatter(-1, demo[:, None], 0.0)
@@ -69,11 +76,26 @@ class DemonstrationLoss(LossModule):
                 loss = -(target * logp).sum(-1).mean()
             else:
                 loss = F.cross_entropy(masked, demo)
-        with torch.no_grad():
-            greedy = q.masked_fill(~mask, torch.finfo(q.dtype).min).argmax(-1)
+        with torch.no_grad():       # the cross-entropy leaves stop to the TD loss: judge its pushes alone
+            allowed = pushes if self.kind == "push_cross_entropy" else mask
+            greedy = q.masked_fill(~allowed, torch.finfo(q.dtype).min).argmax(-1)
             agree = (greedy == demo).float().mean()
             near = _near(greedy, demo).float().mean()
-        return TensorDict({"loss_demo": self.weight * loss, "demo_agreement": agree, "demo_near": near}, [])
+        return TensorDict({"loss_demo": self.weight * (loss + stop_loss), "demo_agreement": agree, "demo_near": near,
+                           "demo_stop_agreement": stop_agree}, [])
+
+    def _stop_decision(self, q, mask, demo, ok) -> tuple[torch.Tensor, torch.Tensor]:
+        """Large margin on stop vs the best allowed push (0 when ``stop_margin`` is 0), and agreement."""
+        pushes = mask.clone()
+        pushes[:, actions.STOP] = False
+        best_push = q.masked_fill(~pushes, torch.finfo(q.dtype).min).max(-1).values
+        q_stop, is_stop = q[:, actions.STOP], demo == actions.STOP
+        valid = ok & pushes.any(-1)
+        agree = ((q_stop > best_push) == is_stop)[valid].float().mean() if valid.any() else q.new_zeros(())
+        if self.stop_margin == 0 or not valid.any():
+            return q.sum() * 0.0, agree.detach()
+        hinge = torch.where(is_stop, best_push + self.stop_margin - q_stop, q_stop + self.stop_margin - best_push)
+        return hinge.clamp(min=0)[valid].mean(), agree.detach()
 
 
 def smoothed_push_target(demo: torch.Tensor, allowed: torch.Tensor, sigma: float) -> torch.Tensor:
