@@ -2,6 +2,7 @@
 
     python recipes/collect_demonstrations.py                     # 2,000 states -> runs/demos
     python recipes/train_dqn.py profile=cpu_recognition demos.path=runs/demos ...
+    python recipes/collect_demonstrations.py learner.run=runs/teacher_global out_dir=runs/demos_dagger  # DAgger
 
 The oracle reads the simulator (which target is hidden, which object covers it); the states it meets
 and its actions are stored as the replay stores observations (``mqa_rl.collectors.demonstrations``).
@@ -28,6 +29,7 @@ from mqa_rl.collectors.demonstrations import DEMOS_META, collect_demonstrations
 from mqa_rl.collectors.rollouts import dataset_fingerprint
 from mqa_rl.envs import actions
 from mqa_rl.envs.sapien_bin import SapienBinEnv
+from mqa_rl.modules.trained_policy import load_greedy
 
 def collect(cfg: DictConfig) -> dict:
     out = Path(cfg.out_dir)
@@ -38,7 +40,13 @@ def collect(cfg: DictConfig) -> dict:
     torch.manual_seed(cfg.seed)
     env = SapienBinEnv(cfg.dataset, seed=cfg.seed, **OmegaConf.to_container(cfg.env))
     t0 = time.perf_counter()
-    demos = collect_demonstrations(env, cfg.states, progress=cfg.progress, **OmegaConf.to_container(cfg.oracle))
+    learner = None
+    if cfg.learner.run:                        # DAgger: the learner acts, the oracle labels
+        learner, _, path = load_greedy(cfg.learner.run, cfg.learner.checkpoint, env)
+        print(f"DAgger: {cfg.learner.share:.0%} of the actions by the greedy policy of {path}")
+    demos = collect_demonstrations(env, cfg.states, progress=cfg.progress, learner=learner,
+                                   learner_share=float(cfg.learner.share) if learner is not None else 0.0,
+                                   seed=cfg.seed, **OmegaConf.to_container(cfg.oracle))
     seconds = time.perf_counter() - t0
     act = demos.get(keys.ACTION)
     allowed = demos.get(keys.ACTION_MASK).gather(-1, act[:, None]).squeeze(-1)

@@ -82,6 +82,19 @@ def test_oracle_demonstrations_are_collected_and_refused_when_they_do_not_fit(sm
     with pytest.raises(ValueError, match="another dataset"):
         load_demonstrations(folder, small_dataset_dir)
     assert torch.equal(load_demonstrations(folder)[keys.ACTION], demos[keys.ACTION])
+    assert len(load_demonstrations([folder, folder])) == 10                  # DAgger's aggregate
+    # DAgger: the learner acts (here it always pushes the same allowed cell), the oracle labels
+    executed = []
+
+    def learner(td):
+        push = int(td[keys.ACTION_MASK][: actions.NUM_PUSHES].nonzero()[len(executed) % 7])
+        executed.append(push)
+        return td.set(keys.ACTION, torch.tensor(push))
+
+    dagger = collect_demonstrations(env, 6, progress=False, learner=learner, learner_share=1.0, **{"lookahead": 1})
+    assert len(executed) == 6 and dagger[keys.ACTION].tolist() != executed      # stored: the oracle's labels
+    with pytest.raises(ValueError, match="learner_share"):
+        collect_demonstrations(env, 2, progress=False, learner_share=0.5)
 
 
 def test_push_cross_entropy_learns_demonstrated_pushes_and_leaves_stops_to_td():

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import torch
 from tensordict import TensorDict
+from torchrl.envs.utils import ExplorationType, set_exploration_type
 from tqdm import tqdm
 
 from mqa_rl import keys
@@ -26,12 +27,22 @@ DEMO_KEYS = (*OBS_KEYS, keys.TARGET_CELLS, keys.ACTION)
 DEMOS_META = "demos.json"            # beside the memmap folder "data": written last (recipes/collect_demonstrations.py)
 
 
-def collect_demonstrations(env, states: int, *, progress: bool = True, **oracle_options) -> TensorDict:
+def collect_demonstrations(env, states: int, *, progress: bool = True, learner=None, learner_share: float = 0.0,
+                           seed: int = 0, **oracle_options) -> TensorDict:
     """[states] oracle steps (observation, oracle action) on ``env`` (a ``SapienBinEnv``): episodes from
-    reset until the oracle stops or the push budget ends, every step kept, the stops included."""
+    reset until the episode ends, every step kept, the stops included.
+
+    With a ``learner`` (a greedy policy module, e.g. ``load_greedy``'s), DAgger (Ross et al. 2011): at
+    each step the learner's action is executed with probability ``learner_share`` (else the oracle's),
+    and the oracle's action is stored either way — labels on the states the learner itself reaches,
+    including "stop now" after the learner's own pushes, which the oracle's episodes never show.
+    """
     if states < 1:
         raise ValueError(f"need states ≥ 1, got {states}")
+    if not 0.0 <= learner_share <= 1.0 or (learner_share > 0 and learner is None):
+        raise ValueError(f"learner_share must lie in [0, 1] and needs a learner, got {learner_share}")
     oracle = PrivilegedPushPolicy(env, **oracle_options)
+    rng = torch.Generator().manual_seed(seed)
     out = []
     bar = tqdm(total=states, desc="demonstrations", disable=not progress)
     while len(out) < states:
@@ -43,6 +54,9 @@ def collect_demonstrations(env, states: int, *, progress: bool = True, **oracle_
                 step.set(key, step.get(key).to(torch.float16))
             out.append(step)
             bar.update(1)
+            if learner is not None and float(torch.rand((), generator=rng)) < learner_share:
+                with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
+                    td = learner(td)
             td = env.step(td)
             if td["next", "done"].item():
                 break
@@ -51,8 +65,14 @@ def collect_demonstrations(env, states: int, *, progress: bool = True, **oracle_
     return torch.stack(out)
 
 
-def load_demonstrations(path: str | Path, dataset_root: str | Path | None = None) -> TensorDict:
-    """The demonstrations in memory; clear errors for a missing, unfinished or other-dataset folder."""
+def load_demonstrations(path, dataset_root: str | Path | None = None) -> TensorDict:
+    """The demonstrations in memory; clear errors for a missing, unfinished or other-dataset folder.
+    A list of folders is concatenated (DAgger's aggregated data set)."""
+    if isinstance(path, (list, tuple)) or (hasattr(path, "__iter__") and not isinstance(path, (str, Path))):
+        parts = [load_demonstrations(p, dataset_root) for p in path]
+        if not parts:
+            raise ValueError("demos.path is an empty list: give one or more demonstration folders")
+        return torch.cat([p.select(*DEMO_KEYS) for p in parts])
     path = Path(path)
     hint = "collect them with `python recipes/collect_demonstrations.py` (or set demos.path=null)"
     if not (path / DEMOS_META).exists():
