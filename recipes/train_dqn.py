@@ -81,6 +81,9 @@ def pretrain_on_demonstrations(state, updates, demo_batch, demo_loss, aux_loss, 
     """DQfD's pre-training phase: margin (and target-map) updates on the demonstrations alone, then the
     target network takes the pretrained weights. Counted in ``state`` (a resumed run does not repeat it)."""
     window = []
+    lr = cfg.demos.get("pretrain_lr") or cfg.optim.lr       # a faster rate gets the pushes' softmax off its plateau
+    for group in optim.param_groups:
+        group["lr"] = lr
     while state["demo_pretrain_updates"] < updates:
         batch = demo_batch()
         td = demo_loss(batch)
@@ -97,6 +100,8 @@ def pretrain_on_demonstrations(state, updates, demo_batch, demo_loss, aux_loss, 
             print(f"demonstration pre-training {state['demo_pretrain_updates']}/{updates}: "
                   + ", ".join(f"{k} {v:.3f}" for k, v in means.items()), flush=True)
             window = []
+    for group in optim.param_groups:
+        group["lr"] = cfg.optim.lr
     with warnings.catch_warnings():             # the target network starts from the pretrained weights
         warnings.simplefilter("ignore")
         target_updater.init_()

@@ -159,11 +159,20 @@ def test_pretrain_then_train_dqn_from_the_recognition_file(small_dataset_dir, tm
     run = tmp_path / "run"
     out = subprocess.run([sys.executable, str(ROOT / "recipes" / "train_dqn.py"), "profile=smoke", f"dataset={small_dataset_dir}",
                           f"out_dir={run}", "threads=1", "model.class_map=true", f"model.pretrained={rec / 'recognition.pt'}",
-                          "loss.target_map_weight=1.0", f"demos.path={demos}", "demos.pretrain_updates=3", "demos.batch_size=4",
+                          "loss.target_map_weight=1.0", f"demos.path=[{demos},{demos}]", "demos.pretrain_updates=3",
+                          "demos.batch_size=4", "demos.loss=push_cross_entropy", "demos.smooth_cells=1.0",
+                          "demos.stop_margin=0.5", "demos.pretrain_lr=3e-3",
                           "buffer.augment=dihedral"], capture_output=True, text=True, timeout=600, env=ENV, cwd=tmp_path)
     assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-3000:]
     assert "done: {'frames': 32" in out.stdout and "demonstration pre-training 3/3" in out.stdout
-    assert (run / "csv" / "scalars" / "train" / "demo_agreement.csv").exists()
+    assert (run / "csv" / "scalars" / "train" / "demo_stop_agreement.csv").exists()
+    # DAgger: the trained policy acts, the oracle labels
+    dagger = tmp_path / "dagger"
+    out = subprocess.run([sys.executable, str(ROOT / "recipes" / "collect_demonstrations.py"), f"dataset={small_dataset_dir}",
+                          f"out_dir={dagger}", "states=4", "progress=false", "env.max_pushes=3", f"learner.run={run}",
+                          "oracle.order=visible_first", "oracle.image_visible=true"],
+                         capture_output=True, text=True, timeout=600, env=ENV, cwd=tmp_path)
+    assert out.returncode == 0 and "DAgger: 50%" in out.stdout and "4 demonstrations" in out.stdout, out.stderr[-3000:]
     # the frozen recognition is unchanged by DQN training, and the trained policy loads for evaluation
     from mqa_rl.envs.sapien_bin import SapienBinEnv
     from mqa_rl.modules.trained_policy import load_greedy
