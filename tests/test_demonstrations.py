@@ -17,6 +17,17 @@ VOCAB, L, S = 30, 8, 224
 SMALL = dict(light_channels=(8, 8, 16, 16), light_downsample=2, fuse_channels=(16, 8), head_channels=(8,), head_context=1)
 
 
+def _fit(net, loss, demos, steps):
+    """``steps`` Adam updates of ``loss`` on the fixed demonstrations; the last loss output."""
+    optim = torch.optim.Adam(net.parameters(), lr=3e-3)
+    for _ in range(steps):
+        td = loss(demos)
+        optim.zero_grad()
+        td["loss_demo"].backward()
+        optim.step()
+    return td
+
+
 def _demos(n=4, seed=0):
     g = torch.Generator().manual_seed(seed)
     mask = torch.ones(n, actions.NUM_ACTIONS, dtype=torch.bool)
@@ -34,12 +45,7 @@ def test_margin_loss_teaches_the_demonstrated_actions_and_skips_masked_ones():
     loss = DemonstrationLoss(net, margin=0.5)
     demos = _demos()
     first = loss(demos)
-    optim = torch.optim.Adam(net.parameters(), lr=3e-3)
-    for _ in range(80):
-        td = loss(demos)
-        optim.zero_grad()
-        td["loss_demo"].backward()
-        optim.step()
+    _fit(net, loss, demos, 80)
     last = loss(demos)
     assert last["loss_demo"] < 0.1 * first["loss_demo"]
     assert last["demo_agreement"] == 1.0 and last["demo_near"] == 1.0 and first["demo_agreement"] < 1.0
@@ -103,12 +109,7 @@ def test_push_cross_entropy_learns_demonstrated_pushes_and_leaves_stops_to_td():
     loss = DemonstrationLoss(net, kind="push_cross_entropy")
     demos = _demos()                                   # one of the four demonstrations is a stop
     first = loss(demos)
-    optim = torch.optim.Adam(net.parameters(), lr=3e-3)
-    for _ in range(60):
-        td = loss(demos)
-        optim.zero_grad()
-        td["loss_demo"].backward()
-        optim.step()
+    _fit(net, loss, demos, 60)
     assert loss(demos)["loss_demo"] < 0.2 * first["loss_demo"]
     with torch.no_grad():
         q = net(demos[keys.RGB], demos[keys.DEPTH], demos[keys.QUESTION])
@@ -162,13 +163,8 @@ def test_smoothed_push_target_spreads_over_nearby_allowed_starts_of_the_same_dir
     net = PushQNet(VOCAB, camera_distance=0.9, **SMALL)
     demos = _demos()
     loss = DemonstrationLoss(net, kind="push_cross_entropy", smooth_cells=1.0)
-    optim = torch.optim.Adam(net.parameters(), lr=3e-3)
     first = loss(demos)["loss_demo"].item()
-    for _ in range(60):
-        td = loss(demos)
-        optim.zero_grad()
-        td["loss_demo"].backward()
-        optim.step()
+    td = _fit(net, loss, demos, 60)
     assert torch.isfinite(td["loss_demo"]) and td["loss_demo"].item() < first
     assert td["demo_near"].item() == 1.0
     with pytest.raises(ValueError, match="smooth_cells"):
@@ -198,12 +194,7 @@ def test_stop_margin_teaches_when_the_demonstrator_stops():
     net = PushQNet(VOCAB, camera_distance=0.9, **SMALL)
     demos = _demos()                                   # the third demonstration is a stop
     loss = DemonstrationLoss(net, kind="push_cross_entropy", smooth_cells=1.0, stop_margin=0.5)
-    optim = torch.optim.Adam(net.parameters(), lr=3e-3)
-    for _ in range(80):
-        td = loss(demos)
-        optim.zero_grad()
-        td["loss_demo"].backward()
-        optim.step()
+    _fit(net, loss, demos, 80)
     assert loss(demos)["demo_stop_agreement"].item() == 1.0
     with torch.no_grad():
         q = net(demos[keys.RGB], demos[keys.DEPTH], demos[keys.QUESTION])
