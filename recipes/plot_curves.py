@@ -12,6 +12,7 @@ smoothed with a moving average over ``--window`` points; testing: the greedy eva
 from __future__ import annotations
 
 import argparse
+import textwrap
 from pathlib import Path
 
 import matplotlib
@@ -62,7 +63,7 @@ def plot(runs: list[Path], out: Path, window: int = 10) -> Path:
         es, ev = read_scalar(run, "eval/reward")
         if len(es):
             ax.plot(es, ev, "o-", color="tab:orange", label="testing (greedy)")
-        ax.set_title(label(run))
+        ax.set_title(textwrap.fill(label(run), 48), fontsize=9)   # long option lists wrap, not overlap
         ax.set_xlabel("env steps")
         ax.set_ylabel("reward per episode")
         ax.grid(alpha=0.3)
