@@ -70,6 +70,7 @@ def main() -> None:
     ap.add_argument("--val", type=int, default=250)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--smooth", type=float, default=0.0, help="ce_push: Gaussian spread of the target in grid cells")
+    ap.add_argument("--head-context", type=int, default=None, help="3x3 context convs in the head (light.yaml's: 2)")
     args = ap.parse_args()
     torch.manual_seed(0)
     torch.set_num_threads(args.threads)
@@ -82,6 +83,8 @@ def main() -> None:
     print(f"{len(train)} training / {len(val)} held-out demonstrations ({len(pushes)} pushes); random pushes inside the "
           f"mask start near a visible target in {float(near_target(random_pushes, pushes[keys.TARGET_CELLS]).float().mean()):.3f}")
     cfg = {**OmegaConf.to_container(OmegaConf.load(ROOT / "recipes" / "conf" / "trunk" / "light.yaml")), "class_map": True}
+    if args.head_context is not None:
+        cfg["head_context"] = args.head_context
     net = make_push_qnet(cfg, vocab_size=len(ds.vocab), camera_distance=ds.camera.distance, num_classes=len(ds.classes))
     load_recognition(net, args.recognition, ds.classes)
     optim = torch.optim.Adam([p for p in net.parameters() if p.requires_grad], lr=args.lr)
