@@ -39,11 +39,11 @@ def collect(cfg: DictConfig) -> dict:
         raise FileNotFoundError(f"dataset {cfg.dataset} does not exist: make it with recipes/make_dataset.py")
     torch.manual_seed(cfg.seed)
     env = SapienBinEnv(cfg.dataset, seed=cfg.seed, **OmegaConf.to_container(cfg.env))
-    t0 = time.perf_counter()
     learner = None
     if cfg.learner.run:                        # DAgger: the learner acts, the oracle labels
         learner, _, path = load_greedy(cfg.learner.run, cfg.learner.checkpoint, env)
         print(f"DAgger: {cfg.learner.share:.0%} of the actions by the greedy policy of {path}")
+    t0 = time.perf_counter()
     demos = collect_demonstrations(env, cfg.states, progress=cfg.progress, learner=learner,
                                    learner_share=float(cfg.learner.share) if learner is not None else 0.0,
                                    seed=cfg.seed, **OmegaConf.to_container(cfg.oracle))

@@ -32,13 +32,14 @@ from mqa_rl.envs.video import write_video
 from mqa_rl.evaluation.answering_report import write_atomic
 from mqa_rl.evaluation.episode_metrics import mean_ci95
 from mqa_rl.evaluation.rollouts import run_episodes
-from mqa_rl.modules.privileged_policy import PrivilegedPushPolicy
+from mqa_rl.modules.frozen_policies import make_frozen_policy
 from mqa_rl.modules.random_policy import RandomMQAPolicy
 from mqa_rl.modules.trained_policy import load_greedy
 
-# References that read the simulator (never a learned policy): the least-visible-first oracle, and the
-# teacher of profile=cpu_visible_teacher (only targets the image shows a part of).
-ORACLES = {"oracle": {}, "visible_teacher": {"order": "visible_first", "image_visible": True}}
+# References that read the simulator (never a learned policy), as frozen-policy specs: the least-visible-first
+# oracle, and the teacher of profile=cpu_visible_teacher (only targets the image shows a part of).
+ORACLES = {"oracle": {"kind": "privileged", "lookahead": 1},
+           "visible_teacher": {"kind": "privileged", "lookahead": 1, "order": "visible_first", "image_visible": True}}
 REPORTED = ("reward", "pushes", "final_simple", "chi_end", "chi_change", "hidden_end", "stopped")
 
 
@@ -101,7 +102,7 @@ def main(cfg: DictConfig) -> None:
             elif name in ("random", "random_masked"):
                 policy = RandomMQAPolicy(max_pushes, seed=cfg.seed, masked=name == "random_masked")
             elif name in ORACLES:
-                policy = PrivilegedPushPolicy(env.base_env, lookahead=1, **ORACLES[name])
+                policy, _ = make_frozen_policy(ORACLES[name], env.base_env, max_pushes)
             else:
                 raise ValueError(f"unknown policy {name!r}; choose among greedy, random, random_masked, "
                                  + ", ".join(ORACLES))

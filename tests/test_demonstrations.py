@@ -28,6 +28,16 @@ def _fit(net, loss, demos, steps):
     return td
 
 
+def _hard_scene_truths(dataset, episodes=6):
+    """(env, ground truth) after each of ``episodes`` resets on hard train scenes."""
+    from mqa_rl.envs.sapien_bin import SapienBinEnv
+
+    env = SapienBinEnv(dataset, split="train", difficulties=["hard"], seed=0)
+    for _ in range(episodes):
+        env.reset()
+        yield env, env.ground_truth()
+
+
 def _demos(n=4, seed=0):
     g = torch.Generator().manual_seed(seed)
     mask = torch.ones(n, actions.NUM_ACTIONS, dtype=torch.bool)
@@ -126,14 +136,10 @@ def test_push_cross_entropy_learns_demonstrated_pushes_and_leaves_stops_to_td():
 def test_visible_first_oracle_serves_partly_visible_targets_first(small_dataset):
     import numpy as np
 
-    from mqa_rl.envs.sapien_bin import SapienBinEnv
     from mqa_rl.modules.privileged_policy import PrivilegedPushPolicy
 
-    env = SapienBinEnv(small_dataset, split="train", difficulties=["hard"], seed=0)
     checked = 0
-    for _ in range(6):
-        env.reset()
-        gt = env.ground_truth()
+    for env, gt in _hard_scene_truths(small_dataset):
         visible_first = PrivilegedPushPolicy(env, lookahead=1, order="visible_first")
         unrevealed = np.flatnonzero(gt["target"] & ~visible_first.revealed(gt["visible"], gt["full"]))
         candidates = visible_first.candidates(gt)
@@ -172,14 +178,10 @@ def test_smoothed_push_target_spreads_over_nearby_allowed_starts_of_the_same_dir
 
 
 def test_image_visible_oracle_only_serves_targets_the_image_shows(small_dataset):
-    from mqa_rl.envs.sapien_bin import SapienBinEnv
     from mqa_rl.modules.privileged_policy import PrivilegedPushPolicy
 
-    env = SapienBinEnv(small_dataset, split="train", difficulties=["hard"], seed=0)
     served = 0
-    for _ in range(6):
-        env.reset()
-        gt = env.ground_truth()
+    for env, gt in _hard_scene_truths(small_dataset):
         policy = PrivilegedPushPolicy(env, lookahead=1, order="visible_first", image_visible=True)
         candidates = policy.candidates(gt)
         assert all(gt["visible"][t] > 0 for _, (t, _) in candidates)

@@ -68,7 +68,7 @@ def collect_demonstrations(env, states: int, *, progress: bool = True, learner=N
 def load_demonstrations(path, dataset_root: str | Path | None = None) -> TensorDict:
     """The demonstrations in memory; clear errors for a missing, unfinished or other-dataset folder.
     A list of folders is concatenated (DAgger's aggregated data set)."""
-    if isinstance(path, (list, tuple)) or (hasattr(path, "__iter__") and not isinstance(path, (str, Path))):
+    if not isinstance(path, (str, Path)):                     # a list (or hydra ListConfig) of folders
         parts = [load_demonstrations(p, dataset_root) for p in path]
         if not parts:
             raise ValueError("demos.path is an empty list: give one or more demonstration folders")

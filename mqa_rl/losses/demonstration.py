@@ -54,21 +54,21 @@ class DemonstrationLoss(LossModule):
         mask = tensordict.get(keys.ACTION_MASK)
         demo = tensordict.get(keys.ACTION).reshape(-1)
         ok = mask.gather(-1, demo[:, None]).squeeze(-1)
-        stop_loss, stop_agree = self._stop_decision(q, mask, demo, ok)
+        pushes = mask.clone()                   # the allowed pushes: mask without stop
+        pushes[:, actions.STOP] = False
+        stop_loss, stop_agree = self._stop_decision(q, pushes, demo, ok)
         if self.kind == "push_cross_entropy":
             ok = ok & (demo != actions.STOP)
         if not ok.any():
             zero = q.sum() * 0.0
             return TensorDict({"loss_demo": self.weight * stop_loss + zero, "demo_agreement": zero.detach(),
                                "demo_near": zero.detach(), "demo_stop_agreement": stop_agree}, [])
-        q, mask, demo = q[ok], mask[ok], demo[ok]
+        q, mask, pushes, demo = q[ok], mask[ok], pushes[ok], demo[ok]
         if self.kind == "margin":
             bonus = torch.full_like(q, self.margin).scatter(-1, demo[:, None], 0.0)
             best = (q + bonus).masked_fill(~mask, torch.finfo(q.dtype).min).max(-1).values
             loss = (best - q.gather(-1, demo[:, None]).squeeze(-1)).mean()
         else:
-            pushes = mask.clone()
-            pushes[:, actions.STOP] = False
             masked = q.masked_fill(~pushes, torch.finfo(q.dtype).min)
             if self.smooth_cells > 0:
                 target = smoothed_push_target(demo, pushes, self.smooth_cells)
@@ -84,10 +84,8 @@ class DemonstrationLoss(LossModule):
         return TensorDict({"loss_demo": self.weight * (loss + stop_loss), "demo_agreement": agree, "demo_near": near,
                            "demo_stop_agreement": stop_agree}, [])
 
-    def _stop_decision(self, q, mask, demo, ok) -> tuple[torch.Tensor, torch.Tensor]:
+    def _stop_decision(self, q, pushes, demo, ok) -> tuple[torch.Tensor, torch.Tensor]:
         """Large margin on stop vs the best allowed push (0 when ``stop_margin`` is 0), and agreement."""
-        pushes = mask.clone()
-        pushes[:, actions.STOP] = False
         best_push = q.masked_fill(~pushes, torch.finfo(q.dtype).min).max(-1).values
         q_stop, is_stop = q[:, actions.STOP], demo == actions.STOP
         valid = ok & pushes.any(-1)

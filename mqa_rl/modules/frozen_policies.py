@@ -6,7 +6,8 @@ mapping), frozen: nothing here learns.
     {kind: none}                            "no manipulation": stop at once (I_stop = I_start)
     {kind: dqn, run: runs/local}            a train_dqn.py run, greedy (newest checkpoint, or checkpoint=...);
                                             epsilon > 0 makes it ε-greedy (rollouts of a question then differ)
-    {kind: privileged, lookahead: 1}        the oracle reference (reads the simulator; see privileged_policy)
+    {kind: privileged, lookahead: 1}        the oracle reference (reads the simulator; see privileged_policy;
+                                            order: visible_first, image_visible: true = the visible teacher)
 
 ``make_frozen_policy(spec, env)`` returns ``(policy, exploration_type)``: ``policy(td)`` writes
 ``action``; run it under ``set_exploration_type(exploration_type)``. ``is_deterministic(spec)``:
@@ -33,7 +34,8 @@ from mqa_rl.modules.trained_policy import load_greedy
 from mqa_rl.modules.random_policy import RandomMQAPolicy
 
 KINDS = ("random", "random_masked", "none", "dqn", "privileged")
-PRIVILEGED_OPTIONS = ("min_visible_px", "min_visible_fraction", "max_tries_per_occluder", "lookahead", "order")
+PRIVILEGED_OPTIONS = ("min_visible_px", "min_visible_fraction", "max_tries_per_occluder", "lookahead", "order",
+                      "image_visible")
 
 
 class StopPolicy(TensorDictModuleBase):
