@@ -179,3 +179,47 @@ def test_trunk_weights_files(tmp_path):
         make_trunk("vgg", None)
     with pytest.raises(ValueError, match="unknown model config keys"):
         make_push_qnet({"trunk": "light", "trunc": 1}, vocab_size=VOCAB, camera_distance=0.9)
+
+
+def test_rotated_head_is_equivariant_to_quarter_turns():
+    """Turning the state 90° counter-clockwise (as seen) turns Q of direction d into direction d + 2."""
+    from mqa_rl.modules.rotated_head import RotatedPushHead
+
+    torch.manual_seed(0)
+    head = RotatedPushHead(6, (8, 8), context=2).eval()
+    state = torch.randn(2, 6, actions.GRID, actions.GRID)
+    with torch.no_grad():
+        q = head(state)
+        q_turned = head(torch.rot90(state, 1, dims=(-2, -1)))
+    assert q.shape == (2, actions.DIRECTIONS + 1, actions.GRID, actions.GRID)
+    for d in range(actions.DIRECTIONS):
+        assert torch.allclose(q_turned[:, (d + 2) % 8], torch.rot90(q[:, d], 1, dims=(-2, -1)), atol=1e-5), d
+    assert not torch.allclose(q[:, 0], q[:, 2], atol=1e-3)          # the directions do differ
+
+
+def test_rotated_head_pushes_right_unrotated_and_up_as_a_quarter_turn():
+    """Direction 0 (right) is the shared head on the state as it is; direction 2 (up, 90° counter-clockwise
+    in the image, the env's convention) is that head on the state turned so that up points right."""
+    from mqa_rl.modules.rotated_head import RotatedPushHead
+
+    torch.manual_seed(1)
+    head = RotatedPushHead(4, (8, 8), context=1).eval()
+    state = torch.randn(1, 4, actions.GRID, actions.GRID)
+    with torch.no_grad():
+        x = torch.nn.functional.pad(head.reduce(state), (2, 2, 2, 2))
+        right = head.push(x)[..., 2:-2, 2:-2]
+        up = torch.rot90(head.push(torch.rot90(x, -1, dims=(-2, -1))), 1, dims=(-2, -1))[..., 2:-2, 2:-2]
+        q = head(state)
+    assert torch.allclose(q[:, 0], right[:, 0], atol=1e-5) and torch.allclose(q[:, 2], up[:, 0], atol=1e-5)
+
+
+def test_rotated_head_config_keeps_the_action_layout():
+    net = make_push_qnet({"trunk": "light", "head_context": 1, "rotated_head": True, "head_channels": [8, 8]},
+                         vocab_size=VOCAB, camera_distance=0.9).eval()
+    rgb, depth, q = _obs((2,))
+    with torch.no_grad():
+        flat, maps = net(rgb, depth, q), net.q_map(rgb, depth, q)
+    assert flat.shape == (2, actions.NUM_ACTIONS)
+    for d, r, c in [(1, 5, 6), (6, 20, 3)]:
+        assert torch.allclose(flat[:, actions.encode(d, r, c)], maps[:, d, r, c])
+    assert torch.allclose(flat[:, actions.STOP], maps[:, 8].mean((-2, -1)), atol=1e-6)

@@ -34,6 +34,10 @@ feature), and the map of the question's targets, t = Σ_c w_c p_c, joins the sta
 Recognition is then learnt once from the segmentation of a few thousand renders (the paper relied on
 ImageNet features for it) and the DQN learns only where to push given t and depth; with it,
 ``target_logits`` is logit(t), so the auxiliary target-map loss trains the question's attention.
+
+``rotated_head`` (VPG's rotation sharing, ``mqa_rl.modules.rotated_head``): one push head scores "push
+right" on the state rotated for each of the 8 directions, so every demonstration and reward teaches all
+directions; same output layout.
 """
 
 from __future__ import annotations
@@ -43,6 +47,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from mqa_rl.envs import actions
+from mqa_rl.modules.rotated_head import RotatedPushHead
 from mqa_rl.modules.trunks import make_trunk
 
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
@@ -96,6 +101,7 @@ class PushQNet(nn.Module):
         film: bool = False,
         class_map: bool = False,
         num_classes: int = 20,
+        rotated_head: bool = False,
     ):
         super().__init__()
         self.trunk_name = trunk
@@ -116,7 +122,9 @@ class PushQNet(nn.Module):
         self.num_classes = int(num_classes)
         self.class_head = nn.Conv2d(self.rgb_trunk.out_channels, 1 + self.num_classes, 1) if class_map else None
         self.question_classes = nn.Linear(question_dim, 1 + self.num_classes) if class_map else None
-        if head_context:      # 1×1 down to head_channels[0], then 3×3 convs at that width
+        if rotated_head:      # one push head for all directions (rotated state), its own stop branch
+            self.head = RotatedPushHead(state, tuple(head_channels), head_context, actions.DIRECTIONS)
+        elif head_context:    # 1×1 down to head_channels[0], then 3×3 convs at that width
             width = head_channels[0]
             context = [nn.Conv2d(state, width, 1), nn.ReLU(inplace=True)]
             for _ in range(head_context):
