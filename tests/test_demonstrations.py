@@ -203,3 +203,37 @@ def test_stop_margin_teaches_when_the_demonstrator_stops():
     best_push = q[:, : actions.NUM_PUSHES].masked_fill(~demos[keys.ACTION_MASK][:, : actions.NUM_PUSHES], -1e9).max(-1).values
     assert (q[:, actions.STOP] > best_push).tolist() == [False, False, True, False]
     assert DemonstrationLoss(net, kind="push_cross_entropy")(demos[2:3])["loss_demo"].item() == 0.0
+
+
+def test_visible_geometry_oracle_reads_only_what_the_image_shows(small_dataset):
+    """Its occluders border the target's visible pixels and stand higher there; the push runs from the
+    target's visible centroid towards the occluder's (same direction bin as the candidate's)."""
+    import math
+
+    import numpy as np
+
+    from mqa_rl.modules.privileged_policy import PrivilegedPushPolicy
+
+    served = 0
+    for env, gt in _hard_scene_truths(small_dataset):
+        policy = PrivilegedPushPolicy(env, lookahead=1, order="visible_first", geometry="visible")
+        seg, ids, depth = gt["seg"], gt["entity_ids"], gt["depth"]
+        candidates = policy.candidates(gt)
+        for i, (action, (t, j)) in enumerate(candidates):
+            target, occluder = seg == ids[t], seg == ids[j]
+            assert target.any() and occluder.any()
+            ys, xs = np.nonzero(target)
+            oy, ox = np.nonzero(occluder)
+            gap = np.min(np.abs(ys[:, None] - oy[None]) + np.abs(xs[:, None] - ox[None]))
+            assert gap <= 2 * policy.border_px
+            v = np.array([ox.mean() + 0.5 - (xs.mean() + 0.5), oy.mean() - ys.mean()])
+            if np.linalg.norm(v) < 2.0:                 # centred on each other: pushed outwards instead
+                continue
+            expected = int(round(math.degrees(math.atan2(-v[1], v[0])) / 45.0)) % actions.DIRECTIONS
+            turn = (actions.decode(action)[0] - expected) % actions.DIRECTIONS
+            assert turn in ((0,) if i == 0 else (0, 1, 7))   # straight away first, then ±45°
+            served += 1
+        assert np.median(depth[seg > 0]) > 0            # depth in metres, not a mask
+    assert served > 0
+    with pytest.raises(ValueError, match="unknown oracle geometry"):
+        PrivilegedPushPolicy(env, geometry="hidden")

@@ -11,11 +11,17 @@ through it. When every target is revealed (or nothing covers the hidden ones, or
 occluder was already pushed ``max_tries_per_occluder`` times without success) it stops.
 ``order="visible_first"`` serves the partly visible targets first (most visible first), then the
 hidden ones: a teacher whose choices an image policy can see (``recipes/collect_demonstrations.py``).
+``geometry="visible"`` goes further: the occluders are the objects whose visible pixels border the
+target's visible pixels and stand higher there (depth), and the push direction runs from the target's
+visible centroid to the occluder's: every input of the choice is in the image (and its segmentation),
+where the default reads the full silhouettes, which the camera cannot see.
 """
 
 from __future__ import annotations
 
 import math
+
+import cv2
 
 import numpy as np
 import torch
@@ -26,6 +32,7 @@ from mqa_rl.envs import actions
 
 
 ORDERS = ("least_visible", "visible_first")
+GEOMETRIES = ("full", "visible")
 
 
 class PrivilegedPushPolicy:
@@ -37,7 +44,8 @@ class PrivilegedPushPolicy:
 
     def __init__(self, env, min_visible_px: int = 20, min_visible_fraction: float = 0.3,
                  max_tries_per_occluder: int = 2, finger_gap_px: float = 3.0, lookahead: int = 6,
-                 order: str = "least_visible", image_visible: bool = False):
+                 order: str = "least_visible", image_visible: bool = False, geometry: str = "full",
+                 border_px: int = 4):
         self.env = env
         self.min_visible_px = min_visible_px
         self.min_visible_fraction = min_visible_fraction
@@ -47,7 +55,10 @@ class PrivilegedPushPolicy:
         if order not in ORDERS:
             raise ValueError(f"unknown target order {order!r}; choose one of {ORDERS}")
         self.order = order
-        self.image_visible = image_visible
+        if geometry not in GEOMETRIES:
+            raise ValueError(f"unknown oracle geometry {geometry!r}; choose one of {GEOMETRIES}")
+        self.geometry, self.border_px = geometry, int(border_px)
+        self.image_visible = image_visible or geometry == "visible"     # a target the image lacks has no border
         self._tries: dict[tuple[int, int], int] = {}
         self._episode = None
 
@@ -94,16 +105,39 @@ class PrivilegedPushPolicy:
             order = targets[np.argsort(np.where(gt["visible"][targets] > 0, -seen_frac, 1.0), kind="stable")]
         out, seen = [], set()
         for t in order:
-            covered = seg[masks[t]]
-            counts = {j: int((covered == ids[j]).sum()) for j in range(len(ids)) if j != t}
+            counts = self._occluders(gt, t)
+            target_shape = masks[t] if self.geometry == "full" else seg == ids[t]
             for j in sorted((j for j, n in counts.items() if n > 0), key=lambda j: -counts[j]):
                 if self._tries.get((int(t), j), 0) >= self.max_tries_per_occluder:
                     continue
+                occluder_shape = masks[j] if self.geometry == "full" else seg == ids[j]
                 for turn in (0, 1, -1):
-                    a = self._push_away(masks[t], seg == ids[j], masks[j], seg.shape, turn)
+                    a = self._push_away(target_shape, seg == ids[j], occluder_shape, seg.shape, turn)
                     if a not in seen:
                         seen.add(a)
                         out.append((a, (int(t), j)))
+        return out
+
+    def _occluders(self, gt: dict, t: int) -> dict[int, int]:
+        """{object: pixels} covering target ``t``: of its full silhouette (``full``), or, seen in the
+        image (``visible``), visible pixels within ``border_px`` of the target's that stand higher than it."""
+        seg, ids = gt["seg"], gt["entity_ids"]
+        if self.geometry == "full":
+            covered = seg[gt["masks"][t]]
+            return {j: int((covered == ids[j]).sum()) for j in range(len(ids)) if j != t}
+        mine = seg == ids[t]
+        kernel = np.ones((2 * self.border_px + 1,) * 2, np.uint8)
+        ring = cv2.dilate(mine.astype(np.uint8), kernel).astype(bool) & ~mine
+        depth = gt["depth"]
+        out = {}
+        for j in np.unique(seg[ring]):
+            k = np.flatnonzero(ids == j)
+            if len(k) == 0 or k[0] == t:
+                continue
+            theirs = ring & (seg == j)
+            near_me = mine & cv2.dilate(theirs.astype(np.uint8), kernel).astype(bool)
+            if near_me.any() and np.median(depth[theirs]) < np.median(depth[near_me]):   # it stands higher
+                out[int(k[0])] = int(theirs.sum())
         return out
 
     def _push_away(self, target_mask: np.ndarray, occluder_visible: np.ndarray, occluder_full: np.ndarray,
