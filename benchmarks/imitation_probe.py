@@ -9,6 +9,7 @@ inside the mask: the base rate, printed first).
     python benchmarks/imitation_probe.py --loss ce_push --steps 1000        # cross-entropy over pushes
     python benchmarks/imitation_probe.py --loss margin --steps 1000         # DQfD's large margin
     python benchmarks/imitation_probe.py --demos runs/demos_image --smooth 1.5   # a soft target around the push
+    python benchmarks/imitation_probe.py --demos runs/demos_image --smooth 1.5 --rotated   # one head, 8 rotations
 """
 
 from __future__ import annotations
@@ -51,12 +52,18 @@ def push_only(td):
 
 
 @torch.no_grad()
-def scores(net, val) -> tuple[float, float, float]:
+def scores(net, val) -> tuple[float, float, float, float]:
+    """Greedy push = the oracle's, near it, near a visible target; and the best direction at the oracle's
+    start cell = its direction (chance 1/8): whether the head learns which way, apart from where."""
     val, mask = push_only(val)
     q = net(val[keys.RGB], val[keys.DEPTH], val[keys.QUESTION]).masked_fill(~mask, torch.finfo(torch.float32).min)
     greedy, demo = q.argmax(-1), val[keys.ACTION]
+    per = actions.GRID ** 2
+    cell = demo % per
+    at_cell = q[:, : actions.NUM_PUSHES].view(-1, actions.DIRECTIONS, per)[torch.arange(len(demo)), :, cell]
     return (float((greedy == demo).float().mean()), float(_near(greedy, demo, 3).float().mean()),
-            float(near_target(greedy, val[keys.TARGET_CELLS]).float().mean()))
+            float(near_target(greedy, val[keys.TARGET_CELLS]).float().mean()),
+            float((at_cell.argmax(-1) == demo // per).float().mean()))
 
 
 def main() -> None:
@@ -71,6 +78,8 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--smooth", type=float, default=0.0, help="ce_push: Gaussian spread of the target in grid cells")
     ap.add_argument("--head-context", type=int, default=None, help="3x3 context convs in the head (light.yaml's: 2)")
+    ap.add_argument("--rotated", action="store_true", help="one push head shared by the 8 directions (rotated_head)")
+    ap.add_argument("--head-channels", type=int, nargs="+", default=None, help="head widths (light.yaml's: 32 16)")
     args = ap.parse_args()
     torch.manual_seed(0)
     torch.set_num_threads(args.threads)
@@ -85,6 +94,10 @@ def main() -> None:
     cfg = {**OmegaConf.to_container(OmegaConf.load(ROOT / "recipes" / "conf" / "trunk" / "light.yaml")), "class_map": True}
     if args.head_context is not None:
         cfg["head_context"] = args.head_context
+    if args.rotated:
+        cfg["rotated_head"] = True
+    if args.head_channels:
+        cfg["head_channels"] = args.head_channels
     net = make_push_qnet(cfg, vocab_size=len(ds.vocab), camera_distance=ds.camera.distance, num_classes=len(ds.classes))
     load_recognition(net, args.recognition, ds.classes)
     optim = torch.optim.Adam([p for p in net.parameters() if p.requires_grad], lr=args.lr)
@@ -100,9 +113,10 @@ def main() -> None:
         loss.backward()
         optim.step()
         if step % 100 == 0 or step == args.steps:
-            same, near, target = scores(net, val)
+            same, near, target, direction = scores(net, val)
             print(f"{args.loss} step {step}: loss {loss.item():.3f}; held-out greedy push = oracle's {same:.3f}, near it "
-                  f"{near:.3f}, near a visible target {target:.3f} ({time.perf_counter() - t0:.0f} s)", flush=True)
+                  f"{near:.3f}, near a visible target {target:.3f}; direction at its cell {direction:.3f} "
+                  f"({time.perf_counter() - t0:.0f} s)", flush=True)
 
 
 if __name__ == "__main__":
