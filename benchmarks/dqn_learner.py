@@ -47,6 +47,7 @@ CONF = Path(__file__).parents[1] / "recipes" / "conf" / "trunk"
 MODELS = {p.stem: dict(OmegaConf.to_container(OmegaConf.load(p))) for p in sorted(CONF.glob("*.yaml"))}   # the recipe's
 MODELS["light_full_res"] = {**MODELS["light"], "light_downsample": 1}                                     # for comparison
 MODELS["light_recognition"] = {**MODELS["light"], "class_map": True}        # profile=cpu_recognition: rgb trunk frozen
+MODELS["light_rotated"] = {**MODELS["light_recognition"], "rotated_head": True, "head_channels": [16, 16]}  # one head, 8 turns
 
 
 def fake_transitions(n: int, gen: torch.Generator) -> TensorDict:
@@ -149,7 +150,8 @@ def mask_effect(dataset: str, pushes: int) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--trunks", nargs="+", default=["light", "light_recognition", "light_full_res", "resnet18", "resnet101"])
+    ap.add_argument("--trunks", nargs="+", default=["light", "light_recognition", "light_rotated", "light_full_res", "resnet18",
+                                                        "resnet101"])
     ap.add_argument("--batch", nargs="+", type=int, default=[16])
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--threads", type=int, default=torch.get_num_threads())

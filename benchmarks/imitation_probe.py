@@ -10,6 +10,7 @@ inside the mask: the base rate, printed first).
     python benchmarks/imitation_probe.py --loss margin --steps 1000         # DQfD's large margin
     python benchmarks/imitation_probe.py --demos runs/demos_image --smooth 1.5   # a soft target around the push
     python benchmarks/imitation_probe.py --demos runs/demos_image --smooth 1.5 --rotated   # one head, 8 rotations
+    python benchmarks/imitation_probe.py --demos runs/demos_geometry --smooth 1.5 --true-targets  # perfect recognition
 """
 
 from __future__ import annotations
@@ -52,10 +53,12 @@ def push_only(td):
 
 
 @torch.no_grad()
-def scores(net, val) -> tuple[float, float, float, float]:
+def scores(net, val, feed=None) -> tuple[float, float, float, float]:
     """Greedy push = the oracle's, near it, near a visible target; and the best direction at the oracle's
     start cell = its direction (chance 1/8): whether the head learns which way, apart from where."""
     val, mask = push_only(val)
+    if feed is not None:
+        feed(val)
     q = net(val[keys.RGB], val[keys.DEPTH], val[keys.QUESTION]).masked_fill(~mask, torch.finfo(torch.float32).min)
     greedy, demo = q.argmax(-1), val[keys.ACTION]
     per = actions.GRID ** 2
@@ -64,6 +67,18 @@ def scores(net, val) -> tuple[float, float, float, float]:
     return (float((greedy == demo).float().mean()), float(_near(greedy, demo, 3).float().mean()),
             float(near_target(greedy, val[keys.TARGET_CELLS]).float().mean()),
             float((at_cell.argmax(-1) == demo // per).float().mean()))
+
+
+class TrueTargets:
+    """``--true-targets``: the class map's target map replaced by the simulator's visible-target cells of
+    the batch (``target_cells``): is the direction learnable when recognition is perfect?"""
+
+    def __init__(self, net):
+        self.cells = None
+        net._targets = lambda fr, qf: self.cells[:, None].to(fr.dtype)
+
+    def __call__(self, batch):
+        self.cells = batch[keys.TARGET_CELLS].float()
 
 
 def main() -> None:
@@ -80,6 +95,7 @@ def main() -> None:
     ap.add_argument("--head-context", type=int, default=None, help="3x3 context convs in the head (light.yaml's: 2)")
     ap.add_argument("--rotated", action="store_true", help="one push head shared by the 8 directions (rotated_head)")
     ap.add_argument("--head-channels", type=int, nargs="+", default=None, help="head widths (light.yaml's: 32 16)")
+    ap.add_argument("--true-targets", action="store_true", help="the simulator's target cells as the target map")
     args = ap.parse_args()
     torch.manual_seed(0)
     torch.set_num_threads(args.threads)
@@ -100,11 +116,14 @@ def main() -> None:
         cfg["head_channels"] = args.head_channels
     net = make_push_qnet(cfg, vocab_size=len(ds.vocab), camera_distance=ds.camera.distance, num_classes=len(ds.classes))
     load_recognition(net, args.recognition, ds.classes)
+    feed = TrueTargets(net) if args.true_targets else None
     optim = torch.optim.Adam([p for p in net.parameters() if p.requires_grad], lr=args.lr)
     margin, augment, t0 = DemonstrationLoss(net), DihedralAugment(), time.perf_counter()
     ce = DemonstrationLoss(net, "push_cross_entropy", smooth_cells=args.smooth)
     for step in range(1, args.steps + 1):
         batch = augment.forward(train[torch.randint(len(train), (16,))].clone())
+        if feed is not None:
+            feed(batch)
         if args.loss == "margin":
             loss = margin(batch)["loss_demo"]
         else:
@@ -113,10 +132,11 @@ def main() -> None:
         loss.backward()
         optim.step()
         if step % 100 == 0 or step == args.steps:
-            same, near, target, direction = scores(net, val)
+            same, near, target, direction = scores(net, val, feed)
+            fit = scores(net, train[: args.val], feed)        # the same on training states: fitting or not at all
             print(f"{args.loss} step {step}: loss {loss.item():.3f}; held-out greedy push = oracle's {same:.3f}, near it "
                   f"{near:.3f}, near a visible target {target:.3f}; direction at its cell {direction:.3f} "
-                  f"({time.perf_counter() - t0:.0f} s)", flush=True)
+                  f"(training states: near {fit[1]:.3f}, direction {fit[3]:.3f}) ({time.perf_counter() - t0:.0f} s)", flush=True)
 
 
 if __name__ == "__main__":
