@@ -22,7 +22,6 @@ from __future__ import annotations
 import math
 
 import cv2
-
 import numpy as np
 import torch
 from tensordict import TensorDictBase
@@ -110,9 +109,10 @@ class PrivilegedPushPolicy:
             for j in sorted((j for j, n in counts.items() if n > 0), key=lambda j: -counts[j]):
                 if self._tries.get((int(t), j), 0) >= self.max_tries_per_occluder:
                     continue
-                occluder_shape = masks[j] if self.geometry == "full" else seg == ids[j]
+                occluder_visible = seg == ids[j]
+                occluder_shape = masks[j] if self.geometry == "full" else occluder_visible
                 for turn in (0, 1, -1):
-                    a = self._push_away(target_shape, seg == ids[j], occluder_shape, seg.shape, turn)
+                    a = self._push_away(target_shape, occluder_visible, occluder_shape, seg.shape, turn)
                     if a not in seen:
                         seen.add(a)
                         out.append((a, (int(t), j)))

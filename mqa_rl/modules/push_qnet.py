@@ -48,19 +48,10 @@ from torch import nn
 
 from mqa_rl.envs import actions
 from mqa_rl.modules.rotated_head import RotatedPushHead
-from mqa_rl.modules.trunks import make_trunk
+from mqa_rl.modules.trunks import conv_stack, make_trunk
 
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
-
-
-def _conv_stack(channels: list[int], kernel: int = 1, last_relu: bool = True) -> nn.Sequential:
-    layers: list[nn.Module] = []
-    for i, (cin, cout) in enumerate(zip(channels[:-1], channels[1:])):
-        layers.append(nn.Conv2d(cin, cout, kernel, padding=kernel // 2))
-        if last_relu or i < len(channels) - 2:
-            layers.append(nn.ReLU(inplace=True))
-    return nn.Sequential(*layers)
 
 
 class QuestionEncoder(nn.Module):
@@ -115,7 +106,7 @@ class PushQNet(nn.Module):
         self.camera_distance = float(camera_distance)
         self.depth_scale = float(depth_scale)
         feat = self.rgb_trunk.out_channels + self.depth_trunk.out_channels
-        self.fuse = _conv_stack([feat, *fuse_channels])
+        self.fuse = conv_stack([feat, *fuse_channels])
         self.question = QuestionEncoder(vocab_size, out=question_dim)
         self.coords = coords
         state = fuse_channels[-1] + question_dim + (2 if coords else 0) + (1 if class_map else 0)
@@ -129,9 +120,9 @@ class PushQNet(nn.Module):
             context = [nn.Conv2d(state, width, 1), nn.ReLU(inplace=True)]
             for _ in range(head_context):
                 context += [nn.Conv2d(width, width, 3, padding=1), nn.ReLU(inplace=True)]
-            self.head = nn.Sequential(*context, _conv_stack([*head_channels, actions.DIRECTIONS + 1], last_relu=False))
+            self.head = nn.Sequential(*context, conv_stack([*head_channels, actions.DIRECTIONS + 1], last_relu=False))
         else:                 # the paper: 1×1 convs only
-            self.head = nn.Sequential(_conv_stack([state, *head_channels, actions.DIRECTIONS + 1], last_relu=False))
+            self.head = nn.Sequential(conv_stack([state, *head_channels, actions.DIRECTIONS + 1], last_relu=False))
         # FiLM (Perez et al. 2018): the question scales and shifts every visual channel, so "features of
         # the asked-about class" is one multiplication away; concatenation alone is additive at 1x1.
         self.film = nn.Linear(question_dim, 2 * fuse_channels[-1]) if film else None

@@ -21,17 +21,13 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from mqa_rl.modules.trunks import conv_stack
+
 
 def _branch(width: int, context: int, head_channels: tuple[int, ...]) -> nn.Sequential:
-    layers: list[nn.Module] = []
-    for _ in range(context):
-        layers += [nn.Conv2d(width, width, 3, padding=1), nn.ReLU(inplace=True)]
-    chans = [width, *head_channels[1:], 1]
-    for i, (cin, cout) in enumerate(zip(chans[:-1], chans[1:])):
-        layers.append(nn.Conv2d(cin, cout, 1))
-        if i < len(chans) - 2:
-            layers.append(nn.ReLU(inplace=True))
-    return nn.Sequential(*layers)
+    """3×3 context convs at ``width``, then 1×1 convs down to one map."""
+    return nn.Sequential(conv_stack([width] * (context + 1), kernel=3),
+                         conv_stack([width, *head_channels[1:], 1], last_relu=False))
 
 
 class RotatedPushHead(nn.Module):

@@ -97,6 +97,16 @@ def load_torchvision_weights(net: nn.Module, arch: str, path: str | Path) -> Non
     net.load_state_dict(state)
 
 
+def conv_stack(channels: list[int], kernel: int = 1, last_relu: bool = True) -> nn.Sequential:
+    """Convs through ``channels`` (same-size padding), each followed by ReLU (the last only if ``last_relu``)."""
+    layers: list[nn.Module] = []
+    for i, (cin, cout) in enumerate(zip(channels[:-1], channels[1:])):
+        layers.append(nn.Conv2d(cin, cout, kernel, padding=kernel // 2))
+        if last_relu or i < len(channels) - 2:
+            layers.append(nn.ReLU(inplace=True))
+    return nn.Sequential(*layers)
+
+
 def make_trunk(name: str, weights: str | Path | None = None, light_channels=(16, 32, 64, 64),
                light_downsample: int = 1, in_channels: int = 3) -> nn.Module:
     """A trunk by name (``TRUNKS``); ``weights`` only applies to the ResNets, ``in_channels`` to light."""
