@@ -96,6 +96,8 @@ def main() -> None:
     ap.add_argument("--rotated", action="store_true", help="one push head shared by the 8 directions (rotated_head)")
     ap.add_argument("--head-channels", type=int, nargs="+", default=None, help="head widths (light.yaml's: 32 16)")
     ap.add_argument("--true-targets", action="store_true", help="the simulator's target cells as the target map")
+    ap.add_argument("--direction-weight", type=float, default=0.0,
+                    help="plus this weight times the cross-entropy over the 8 directions at the demonstrated cell")
     args = ap.parse_args()
     torch.manual_seed(0)
     torch.set_num_threads(args.threads)
@@ -119,7 +121,7 @@ def main() -> None:
     feed = TrueTargets(net) if args.true_targets else None
     optim = torch.optim.Adam([p for p in net.parameters() if p.requires_grad], lr=args.lr)
     margin, augment, t0 = DemonstrationLoss(net), DihedralAugment(), time.perf_counter()
-    ce = DemonstrationLoss(net, "push_cross_entropy", smooth_cells=args.smooth)
+    ce = DemonstrationLoss(net, "push_cross_entropy", smooth_cells=args.smooth, direction_weight=args.direction_weight)
     for step in range(1, args.steps + 1):
         batch = augment.forward(train[torch.randint(len(train), (16,))].clone())
         if feed is not None:

@@ -176,7 +176,8 @@ def train(cfg: DictConfig) -> dict:
     demo_cfg = cfg.get("demos") or {}
     demos = load_demonstrations(demo_cfg["path"], cfg.dataset) if demo_cfg.get("path") else None
     demo_loss = (DemonstrationLoss(net, demo_cfg.get("loss", "margin"), demo_cfg["margin"], demo_cfg["weight"],
-                                   demo_cfg.get("smooth_cells", 0.0), demo_cfg.get("stop_margin", 0.0))
+                                   demo_cfg.get("smooth_cells", 0.0), demo_cfg.get("stop_margin", 0.0),
+                                   demo_cfg.get("direction_weight", 0.0))
                  if demos is not None else None)
     demo_augment = DihedralAugment() if buf.get("augment", "none") == "dihedral" else None
 

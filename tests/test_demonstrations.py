@@ -236,3 +236,34 @@ def test_visible_geometry_oracle_reads_only_what_the_image_shows(small_dataset):
     assert served > 0
     with pytest.raises(ValueError, match="unknown oracle geometry"):
         PrivilegedPushPolicy(env, geometry="hidden")
+
+
+def test_direction_term_scores_the_eight_directions_at_the_demonstrated_cell():
+    """The direction cross-entropy reads exactly Q(d, start cell) for the 8 d, is 0 on stops, and training
+    on it alone makes the demonstrated direction the best at its cell while leaving the cell open."""
+    from mqa_rl.losses.demonstration import direction_cross_entropy
+
+    q = torch.zeros(2, actions.NUM_ACTIONS)
+    q[0, actions.encode(3, 5, 7)] = 4.0                 # the demonstrated push of state 0
+    q[0, actions.encode(1, 5, 7)] = 2.0                 # another direction at the same cell
+    q[0, actions.encode(6, 9, 9)] = 50.0                # another cell: not part of the term
+    demo = torch.tensor([actions.encode(3, 5, 7), actions.STOP])
+    expected = torch.nn.functional.cross_entropy(torch.tensor([[0, 2.0, 0, 4.0, 0, 0, 0, 0]]), torch.tensor([3]))
+    assert torch.isclose(direction_cross_entropy(q, demo), expected)
+    assert direction_cross_entropy(q[1:], demo[1:]).item() == 0.0
+
+    torch.manual_seed(0)
+    net = PushQNet(VOCAB, camera_distance=0.9, **SMALL)
+    demos = _demos()
+    plain = DemonstrationLoss(net, kind="push_cross_entropy")
+    both = DemonstrationLoss(net, kind="push_cross_entropy", direction_weight=1.0)
+    assert both(demos)["loss_demo"] > plain(demos)["loss_demo"]
+    _fit(net, both, demos, 40)
+    with torch.no_grad():
+        q = net(demos[keys.RGB], demos[keys.DEPTH], demos[keys.QUESTION])
+    per = actions.GRID ** 2
+    pushes = demos[keys.ACTION][demos[keys.ACTION] != actions.STOP]
+    at_cell = q[demos[keys.ACTION] != actions.STOP, : actions.NUM_PUSHES].view(-1, actions.DIRECTIONS, per)
+    assert torch.equal(at_cell[torch.arange(len(pushes)), :, pushes % per].argmax(-1), pushes // per)
+    with pytest.raises(ValueError, match="direction_weight"):
+        DemonstrationLoss(net, kind="push_cross_entropy", direction_weight=-1.0)
