@@ -10,6 +10,7 @@ DEPTH = "depth"                               # float32 [1, H, W], metres along 
 QUESTION = "question"                         # int64 [L], question tokens, 0-padded
 ACTION = "action"                             # int64 [], push index or STOP
 ACTION_MASK = "action_mask"                   # bool [NUM_ACTIONS] pushes whose start (from depth) is inside the bin, and stop
+PUSHED = "pushed"                             # bool [NUM_PUSHES] pushes made this episode, with neighbours (PushMemory)
 RESET_QUESTION = "reset_question"             # optional int64 [1] in a reset tensordict: a question index
 REWARD = "reward"
 

@@ -45,11 +45,12 @@ ORACLES = {"oracle": {"kind": "privileged", "lookahead": 1},
 REPORTED = ("reward", "pushes", "final_simple", "chi_end", "chi_change", "hidden_end", "stopped")
 
 
-def episodes_meta(cfg: DictConfig, dataset, level: str, qtypes, max_pushes: int, reward: dict) -> dict:
+def episodes_meta(cfg: DictConfig, dataset, level: str, qtypes, max_pushes: int, reward: dict,
+                  push_memory: int | None = None) -> dict:
     """What makes two evaluations' episodes the same questions (and the same reward)."""
     return {"dataset": str(Path(dataset).resolve()), "split": cfg.split, "seed": int(cfg.seed), "level": level,
             "episodes": int(cfg.episodes_per_level), "max_pushes": max_pushes, "pusher": cfg.pusher,
-            "question_types": list(qtypes) if qtypes else None, "reward": reward}
+            "question_types": list(qtypes) if qtypes else None, "reward": reward, "push_memory": push_memory}
 
 
 def reuse_baseline(folder, name: str, meta: dict) -> dict[str, torch.Tensor] | None:
@@ -58,7 +59,9 @@ def reuse_baseline(folder, name: str, meta: dict) -> dict[str, torch.Tensor] | N
     if not path.is_file():
         return None
     saved = torch.load(path, weights_only=False)
-    same = {k: v for k, v in meta.items() if k != "reward"}
+    # the reward is checked below; the paper's random never reads the action mask, so PushMemory leaves it alone
+    ignored = ("reward", "push_memory") if name == "random" else ("reward",)
+    same = {k: v for k, v in meta.items() if k not in ignored}
     if {k: saved["meta"].get(k) for k in same} != same:
         print(f"  {path}: other questions or settings, not reused")
         return None
@@ -84,12 +87,14 @@ def main(cfg: DictConfig) -> None:
     max_pushes = int(run_cfg.env.max_pushes) if run_cfg else 10
     qtypes = cfg.question_types or (list(run_cfg.env.question_types) if run_cfg else None)
     threshold = float(reward.get("simple_threshold", 0.2))
+    push_memory = cfg.push_memory if cfg.push_memory is not None else (run_cfg.env.get("push_memory") if run_cfg else None)
+    push_memory = None if push_memory is None or int(push_memory) < 0 else int(push_memory)
     results, lines = {}, []
     for level in cfg.difficulties:
         env = make_mqa_env(str(dataset), reward, episode_stats=True, split=cfg.split, difficulties=[level],
-                           question_types=qtypes, max_pushes=max_pushes, pusher=cfg.pusher)
+                           question_types=qtypes, max_pushes=max_pushes, pusher=cfg.pusher, push_memory=push_memory)
         per_policy = {}
-        meta = episodes_meta(cfg, dataset, level, qtypes, max_pushes, reward)
+        meta = episodes_meta(cfg, dataset, level, qtypes, max_pushes, reward, push_memory)
         for name in cfg.policies:
             env.base_env.set_seed(cfg.seed)                 # the same questions for every policy
             on_episode = None

@@ -304,6 +304,8 @@ def train(cfg: DictConfig) -> dict:
                                 R=f"{metrics.get('train/reward', float('nan')):+.2f}")
                 t_wait = time.perf_counter()
         bar.close()
+    if state["frames"] >= total:    # finished: the last checkpoint holds the buffer; free its working copy
+        shutil.rmtree(scratch, ignore_errors=True)
     logger.close()
     eval_env.close()
     summary = {"frames": state["frames"], "updates": state["updates"], "episodes": state["episodes"],

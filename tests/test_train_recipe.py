@@ -42,6 +42,7 @@ def test_tiny_training_run_evaluation_and_curves(small_dataset_dir, tmp_path):
     eps = [v for _, v in _scalars(run, "train/epsilon")]
     assert eps[0] > eps[-1]                                           # ε anneals with frames
     assert (run / "config.yaml").exists() and list((run / "checkpoints").glob("checkpoint-*32"))
+    assert not (run / "replay_scratch").exists()      # finished: its buffer lives in the checkpoint
     assert list((run / "media").glob("eval_qmap_*.png")) and list((run / "media").glob("eval_*_0.gif"))
     # the same out_dir again without resume=true is refused, not overwritten
     again = _run(TRAIN, "profile=smoke", f"dataset={small_dataset_dir}", f"out_dir={run}", cwd=tmp_path, ok=False)

@@ -16,17 +16,22 @@ from mqa_rl.envs.sapien_bin import SapienBinEnv
 from mqa_rl.transforms.base import RewardTerm
 from mqa_rl.transforms.episode_stats import EpisodeStats
 from mqa_rl.transforms.factory import make_reward_transform
+from mqa_rl.transforms.push_memory import PushMemory
 
 
 def make_mqa_env(dataset, reward: Mapping | None = None, counter: torch.Tensor | None = None,
-                 episode_stats: bool = False, **env_kwargs):
+                 episode_stats: bool = False, push_memory: int | None = None, **env_kwargs):
     """``SapienBinEnv(dataset, **env_kwargs)``, wrapped with ``make_reward_transform(reward)`` if given,
-    and with ``EpisodeStats`` over the reward and its terms when ``episode_stats`` (training, evaluation)."""
+    with ``EpisodeStats`` over the reward and its terms when ``episode_stats`` (training, evaluation), and
+    with ``PushMemory(push_memory)`` (no push twice in an episode; the radius in grid cells) unless None."""
     env = SapienBinEnv(dataset, **env_kwargs)
+    memory = [PushMemory(push_memory)] if push_memory is not None else []
     if reward is None:
-        return env
+        return TransformedEnv(env, memory[0]) if memory else env
     stack = make_reward_transform(reward, push_length=env.push_length, counter=counter)
     if episode_stats:           # sum the reward terms (not β nor the simple-scene flag) over episodes
         summed = [t.out_key[1] for t in stack if isinstance(t, RewardTerm) and t.out_key not in (keys.BETA, keys.SIMPLE_SCENE)]
         stack.append(EpisodeStats(tuple(summed)))
+    for transform in memory:
+        stack.append(transform)
     return TransformedEnv(env, stack)
