@@ -11,6 +11,7 @@ inside the mask: the base rate, printed first).
     python benchmarks/imitation_probe.py --demos runs/demos_image --smooth 1.5   # a soft target around the push
     python benchmarks/imitation_probe.py --demos runs/demos_image --smooth 1.5 --rotated   # one head, 8 rotations
     python benchmarks/imitation_probe.py --demos runs/demos_geometry --smooth 1.5 --true-targets  # perfect recognition
+    python benchmarks/imitation_probe.py --demos runs/demos_geometry --smooth 1.5 --rotated --direction-weight 1.0
 """
 
 from __future__ import annotations

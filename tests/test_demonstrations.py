@@ -240,7 +240,7 @@ def test_visible_geometry_oracle_reads_only_what_the_image_shows(small_dataset):
 
 def test_direction_term_scores_the_eight_directions_at_the_demonstrated_cell():
     """The direction cross-entropy reads exactly Q(d, start cell) for the 8 d, is 0 on stops, and training
-    on it alone makes the demonstrated direction the best at its cell while leaving the cell open."""
+    with it makes the demonstrated direction the best at its cell."""
     from mqa_rl.losses.demonstration import direction_cross_entropy
 
     q = torch.zeros(2, actions.NUM_ACTIONS)

@@ -25,13 +25,13 @@ def make_mqa_env(dataset, reward: Mapping | None = None, counter: torch.Tensor |
     with ``EpisodeStats`` over the reward and its terms when ``episode_stats`` (training, evaluation), and
     with ``PushMemory(push_memory)`` (no push twice in an episode; the radius in grid cells) unless None."""
     env = SapienBinEnv(dataset, **env_kwargs)
-    memory = [PushMemory(push_memory)] if push_memory is not None else []
+    memory = PushMemory(push_memory) if push_memory is not None else None
     if reward is None:
-        return TransformedEnv(env, memory[0]) if memory else env
+        return env if memory is None else TransformedEnv(env, memory)
     stack = make_reward_transform(reward, push_length=env.push_length, counter=counter)
     if episode_stats:           # sum the reward terms (not β nor the simple-scene flag) over episodes
         summed = [t.out_key[1] for t in stack if isinstance(t, RewardTerm) and t.out_key not in (keys.BETA, keys.SIMPLE_SCENE)]
         stack.append(EpisodeStats(tuple(summed)))
-    for transform in memory:
-        stack.append(transform)
+    if memory is not None:
+        stack.append(memory)
     return TransformedEnv(env, stack)
