@@ -4,6 +4,7 @@
     python recipes/evaluate_policy.py run=... policies=[greedy] episodes_per_level=3 video_episodes=3
     python recipes/evaluate_policy.py run=... pusher=arm      # the same policy pushing with the Panda arm
     python recipes/evaluate_policy.py run=... 'policies=[greedy,random,visible_teacher]'   # + its teacher
+    python recipes/evaluate_policy.py run=... budget=2    # the greedy policy stops after 2 pushes
 
 Per level and policy, over the same questions (the env is seeded alike for every policy): mean
 episode reward, pushes, fraction of episodes ending in a simple scene, change of the targets' mean
@@ -32,7 +33,7 @@ from mqa_rl.envs.video import write_video
 from mqa_rl.evaluation.answering_report import write_atomic
 from mqa_rl.evaluation.episode_metrics import mean_ci95
 from mqa_rl.evaluation.rollouts import run_episodes
-from mqa_rl.modules.frozen_policies import make_frozen_policy
+from mqa_rl.modules.frozen_policies import PushBudget, make_frozen_policy
 from mqa_rl.modules.random_policy import RandomMQAPolicy
 from mqa_rl.modules.trained_policy import load_greedy
 
@@ -101,6 +102,8 @@ def main(cfg: DictConfig) -> None:
             reused = reuse_baseline(cfg.baseline_from, name, meta) if cfg.baseline_from and name != "greedy" else None
             if name == "greedy":
                 policy, _, ckpt = load_greedy(Path(cfg.run), cfg.checkpoint, env)
+                if cfg.budget is not None:
+                    policy = PushBudget(policy, int(cfg.budget))
 
                 def on_episode(i, rollout, level=level):
                     if i < cfg.video_episodes:

@@ -49,6 +49,27 @@ class StopPolicy(TensorDictModuleBase):
         return tensordict
 
 
+class PushBudget(TensorDictModuleBase):
+    """``policy``, but it stops once the episode has ``budget`` pushes (the env's ``push_count``).
+
+    A diagnostic for policies that do not learn when to stop: the learned DQN policies either stop at once
+    or push until ``max_pushes``, and a push after the targets are uncovered can cover them again."""
+
+    def __init__(self, policy, budget: int):
+        super().__init__()
+        if budget < 0:
+            raise ValueError(f"a push budget must be >= 0 pushes, got {budget}")
+        self.policy, self.budget = policy, int(budget)
+        self.in_keys = [*getattr(policy, "in_keys", []), keys.PUSH_COUNT]
+        self.out_keys = [keys.ACTION]
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        tensordict = self.policy(tensordict)
+        spent = tensordict.get(keys.PUSH_COUNT).reshape(tensordict.get(keys.ACTION).shape) >= self.budget
+        tensordict.set(keys.ACTION, torch.where(spent, actions.STOP, tensordict.get(keys.ACTION)))
+        return tensordict
+
+
 def check_spec(spec: Mapping) -> dict:
     """The spec as a plain dict, checked: a known kind, a run folder with a checkpoint for ``dqn``."""
     spec = dict(spec)
