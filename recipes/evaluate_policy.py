@@ -38,11 +38,14 @@ from mqa_rl.modules.random_policy import RandomMQAPolicy
 from mqa_rl.modules.trained_policy import load_greedy
 
 # References that read the simulator (never a learned policy), as frozen-policy specs: the least-visible-first
-# oracle, the teacher of profile=cpu_visible_teacher (only targets the image shows a part of), and the
-# image teacher (its occluders and directions from visible pixels and depth alone).
+# oracle, the teacher of profile=cpu_visible_teacher (only targets the image shows a part of), the
+# image teacher (its occluders and directions from visible pixels and depth alone), and the image teacher
+# whose push is refined by simulating its direction from the 8 neighbouring start cells.
 ORACLES = {"oracle": {"kind": "privileged", "lookahead": 1},
            "visible_teacher": {"kind": "privileged", "lookahead": 1, "order": "visible_first", "image_visible": True},
-           "image_teacher": {"kind": "privileged", "lookahead": 1, "order": "visible_first", "geometry": "visible"}}
+           "image_teacher": {"kind": "privileged", "lookahead": 1, "order": "visible_first", "geometry": "visible"},
+           "refined_teacher": {"kind": "privileged", "lookahead": 1, "order": "visible_first", "geometry": "visible",
+                               "refine_radius": 1}}
 REPORTED = ("reward", "pushes", "final_simple", "chi_end", "chi_change", "hidden_end", "stopped")
 
 

@@ -128,3 +128,18 @@ def test_an_old_schema_dataset_asks_to_regenerate(small_dataset_dir, tmp_path):
     (old / "manifest.json").write_text(json.dumps(manifest))
     with pytest.raises(DatasetError, match="old dataset schema 1.*regenerate"):
         MQADataset(old)
+
+
+def test_refined_teacher_keeps_the_direction_and_shows_the_targets_at_least_as_well(hard_env):
+    q, _ = _hidden_questions(hard_env, 1)[0]
+    hard_env.reset(question_id=q.id)
+    plain = PrivilegedPushPolicy(hard_env, lookahead=1, order="visible_first", geometry="visible")
+    refined = PrivilegedPushPolicy(hard_env, lookahead=1, order="visible_first", geometry="visible", refine_radius=1)
+    a, b = plain.choose(), refined.choose()
+    assert a != actions.STOP
+    (da, ra, ca), (db, rb, cb) = actions.decode(a), actions.decode(b)
+    assert da == db and abs(ra - rb) <= 1 and abs(ca - cb) <= 1
+    target = hard_env.ground_truth()["target"]
+    assert refined.score(hard_env.preview(b), target) >= refined.score(hard_env.preview(a), target)
+    with pytest.raises(ValueError, match="refine_radius"):
+        PrivilegedPushPolicy(hard_env, refine_radius=-1)

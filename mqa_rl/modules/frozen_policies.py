@@ -35,7 +35,7 @@ from mqa_rl.modules.random_policy import RandomMQAPolicy
 
 KINDS = ("random", "random_masked", "none", "dqn", "privileged")
 PRIVILEGED_OPTIONS = ("min_visible_px", "min_visible_fraction", "max_tries_per_occluder", "lookahead", "order",
-                      "image_visible", "geometry")
+                      "image_visible", "geometry", "refine_radius")
 
 
 class StopPolicy(TensorDictModuleBase):
