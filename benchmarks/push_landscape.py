@@ -32,8 +32,8 @@ from mqa_rl.modules.privileged_policy import PrivilegedPushPolicy
 
 
 def targets_chi(m: dict, target: np.ndarray) -> float:
-    """Mean hidden fraction of the targets: 1 − visible / full silhouette area."""
-    return float(np.mean(1.0 - np.clip(m["visible"][target] / np.maximum(m["full"][target], 1.0), 0.0, 1.0)))
+    """Mean hidden fraction χ of the targets in a ``measure()`` / ``preview()`` result."""
+    return float(m["overlap"][target].mean())
 
 
 def candidates(teacher_push: int, mask: np.ndarray, rng: np.random.Generator, n_random: int) -> dict[str, list[int]]:

@@ -2,7 +2,7 @@
 # The paper's Table III at full scale on the default dataset (answering=default: every COUNTING question,
 # 3 random rollouts per training question), with the paper's VQA (vqa=eqa):
 #   1. the three DQN variants at the default CPU config, unless runs/<variant> already holds a checkpoint
-#   2. rollouts of no manipulation and random; the VQA encoder pretrained on random's frames
+#   2. rollouts of random; the VQA encoder pretrained on their frames
 #   3. per system (random, no manipulation, privileged, DQN(R_g), DQN(R_l), DQN(R_g+R_l)): rollouts, its VQA
 #   4. Table III, per type, policies, Fig. 7                       -> runs/answering/report/counting-eqa
 # Each system is complete before the next starts, and every step resumes or skips what is done, so an
@@ -21,20 +21,15 @@ for v in global local global_local; do
     python recipes/train_dqn.py "reward=$v" "out_dir=runs/$v" resume=true
   fi
 done
-rollouts_and_vqa() {
-  step "rollouts of $1"
-  python recipes/collect_rollouts.py "${EXTRA[@]}" "system=$1"
-  if [[ "${2:-}" == encoder ]]; then
-    step "VQA encoder pretraining (random's frames)"
-    python recipes/pretrain_vqa_encoder.py "${EXTRA[@]}" resume=true
-  fi
-  step "VQA of $1"
-  python recipes/train_vqa.py "${EXTRA[@]}" "system=$1" resume=true
-}
-python recipes/collect_rollouts.py "${EXTRA[@]}" system=no_manipulation
-rollouts_and_vqa random encoder
-for s in no_manipulation privileged dqn_global dqn_local dqn_global_local; do
-  rollouts_and_vqa "$s"
+step "rollouts of random (the VQA encoder learns from their frames)"
+python recipes/collect_rollouts.py "${EXTRA[@]}" system=random
+step "VQA encoder pretraining"
+python recipes/pretrain_vqa_encoder.py "${EXTRA[@]}" resume=true
+for s in random no_manipulation privileged dqn_global dqn_local dqn_global_local; do
+  step "rollouts of $s"
+  python recipes/collect_rollouts.py "${EXTRA[@]}" "system=$s"     # random's: already complete, skipped
+  step "VQA of $s"
+  python recipes/train_vqa.py "${EXTRA[@]}" "system=$s" resume=true
 done
 step "Table III"
 python recipes/evaluate.py "${EXTRA[@]}"
