@@ -3,6 +3,7 @@ acting forward pass, and the replay bytes per transition. Synthetic batches with
 
     python benchmarks/dqn_learner.py                          # light, resnet18, resnet101; batch 16
     python benchmarks/dqn_learner.py --trunks light --batch 16 32 --threads 2
+    python benchmarks/dqn_learner.py --device cuda --batch 16 64 256       # the paper-scale config on a GPU
 
 End-to-end env steps/s of the training loop come from the recipe's own log (``time/env_steps_per_s``,
 ``time/updates_per_s``, ``time/loop_env_steps_per_s`` in ``csv/scalars``); ``--e2e DATASET`` runs short
@@ -69,11 +70,18 @@ def fake_transitions(n: int, gen: torch.Generator) -> TensorDict:
     return td
 
 
-def time_update(model: dict, batch: int, repeats: int) -> tuple[float, float]:
+def wall(device: torch.device) -> float:
+    """Wall-clock seconds once the device has finished its queued work (CUDA runs asynchronously)."""
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+    return time.perf_counter()
+
+
+def time_update(model: dict, batch: int, repeats: int, device: torch.device = torch.device("cpu")) -> tuple[float, float]:
     """Median seconds of (one update, one acting forward of a single observation)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        net = make_push_qnet(model, vocab_size=VOCAB, camera_distance=0.9)
+        net = make_push_qnet(model, vocab_size=VOCAB, camera_distance=0.9).to(device)
     if model.get("class_map") and model.get("pretrained_frozen", True):     # as after load_recognition
         for p in (*net.rgb_trunk.parameters(), *net.class_head.parameters()):
             p.requires_grad_(False)
@@ -83,21 +91,22 @@ def time_update(model: dict, batch: int, repeats: int) -> tuple[float, float]:
     gen = torch.Generator().manual_seed(0)
     data = compact_transitions(fake_transitions(batch, gen))
     data.set("priority_weight", torch.ones(batch))
+    data = data.to(device)
     times, acts = [], []
     for i in range(repeats + 1):
-        t0 = time.perf_counter()
+        t0 = wall(device)
         out = loss(data.clone())
         opt.zero_grad()
         out["loss"].backward()
         opt.step()
         updater.step()
         if i:
-            times.append(time.perf_counter() - t0)
+            times.append(wall(device) - t0)
         with torch.no_grad():
-            t0 = time.perf_counter()
+            t0 = wall(device)
             actor(data[:1].clone())
             if i:
-                acts.append(time.perf_counter() - t0)
+                acts.append(wall(device) - t0)
     return statistics.median(times), statistics.median(acts)
 
 
@@ -155,6 +164,7 @@ def main() -> None:
     ap.add_argument("--batch", nargs="+", type=int, default=[16])
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--threads", type=int, default=torch.get_num_threads())
+    ap.add_argument("--device", default="cpu", help="where the learner runs (cuda: the GPU figures)")
     ap.add_argument("--e2e", metavar="DATASET", help="also run the recipe briefly with 1 and 2 workers on DATASET")
     ap.add_argument("--e2e-frames", type=int, default=96)
     ap.add_argument("--mask-effect", metavar="DATASET", help="also compare random pushes with and without the mask")
@@ -165,12 +175,17 @@ def main() -> None:
     b = transition_bytes(example)
     print(f"replay: {b / 1e3:.1f} kB per transition ({SIZE}² images) -> 4,000: {4000 * b / 2**30:.2f} GiB, "
           f"50,000: {50000 * b / 2**30:.1f} GiB (memmap on disk)")
-    print(f"torch threads: {torch.get_num_threads()}")
+    device = torch.device(args.device)
+    print(f"torch threads: {torch.get_num_threads()}, device: "
+          f"{torch.cuda.get_device_name(device) if device.type == 'cuda' else 'cpu'}")
     print(f"load average before: {os.getloadavg()[0]:.2f} (the machine is shared: timings vary with it)")
     for trunk in args.trunks:
         for batch in args.batch:
-            upd, act = time_update(MODELS[trunk], batch, args.repeats)
-            print(f"{trunk:>10} batch {batch:3d}: update {upd * 1e3:8.1f} ms   acting forward (1 obs) {act * 1e3:7.1f} ms")
+            if device.type == "cuda":
+                torch.cuda.reset_peak_memory_stats(device)
+            upd, act = time_update(MODELS[trunk], batch, args.repeats, device)
+            peak = f"   peak GPU memory {torch.cuda.max_memory_allocated(device) / 2**30:.2f} GiB" if device.type == "cuda" else ""
+            print(f"{trunk:>10} batch {batch:3d}: update {upd * 1e3:8.1f} ms   acting forward (1 obs) {act * 1e3:7.1f} ms{peak}")
     if args.mask_effect:
         mask_effect(args.mask_effect, args.mask_pushes)
     if args.e2e:
