@@ -5,6 +5,8 @@ above the bin floor (depth), all from the CNN's 32×10×10 bottleneck.
     python recipes/collect_rollouts.py system=random splits=[train]    # the frames come from these rollouts
     python recipes/pretrain_vqa_encoder.py
     python recipes/pretrain_vqa_encoder.py resume=true                 # continue a killed run
+    python recipes/pretrain_vqa_encoder.py export_pack=runs/frames.xz  # the frames in one file (~16 kB each) ...
+    python recipes/pretrain_vqa_encoder.py frames.pack=runs/frames.xz device=cuda   # ... to train on a GPU machine
 
 Writes ``out_dir/encoder.pt`` (the encoder with the lowest validation loss on held-out scenes; what
 recipes/train_vqa.py loads), ``checkpoints/`` (atomic, for resume=true), ``csv/`` + ``wandb/`` logs
@@ -31,11 +33,11 @@ from torch import nn  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
 from mqa_rl import keys  # noqa: E402
-from mqa_rl.collectors.rollouts import dataset_fingerprint  # noqa: E402
 from mqa_rl.data import MQADataset  # noqa: E402
 from mqa_rl.evaluation.answering_report import write_atomic  # noqa: E402
 from mqa_rl.losses.encoder_pretraining import EncoderPretrainLoss  # noqa: E402
 from mqa_rl.modules.vqa_encoder import FrameEncoder, PretrainHeads, save_encoder  # noqa: E402
+from mqa_rl.training.frame_pack import load_frame_pack, save_frame_pack  # noqa: E402
 from mqa_rl.training.model_checkpoint import ModelCheckpoint  # noqa: E402
 from mqa_rl.training.run_logger import RunLogger, trim_scalars  # noqa: E402
 from mqa_rl.training.signals import exit_on_sigterm  # noqa: E402
@@ -46,7 +48,7 @@ ENCODER_FILE = "encoder.pt"
 
 def augment(batch: TensorDict) -> TensorDict:
     """The same random dihedral transform of rgb, depth and class map, per frame."""
-    k = torch.randint(DIHEDRAL, (batch.shape[0],))
+    k = torch.randint(DIHEDRAL, (batch.shape[0],)).to(batch.device)   # drawn on the CPU: the same stream anywhere
     for key in (keys.RGB, keys.DEPTH, keys.CLASS_MAP, keys.OBJECT_MAP):
         x = batch.get(key).clone()
         for t in k.unique().tolist():
@@ -69,6 +71,32 @@ def validate(loss: EncoderPretrainLoss, frames: TensorDict, device, batch_size: 
     return out
 
 
+def read_frames(cfg: DictConfig) -> tuple[TensorDict, dict]:
+    """The frames, and what the recipe needs of their dataset (classes, camera distance, fingerprint,
+    stores): from the rollout stores and the dataset, or from a frame pack (``frames.pack``) alone."""
+    if cfg.frames.get("pack"):
+        frames, meta = load_frame_pack(cfg.frames.pack)
+        if cfg.frames.max_frames is not None and len(frames) > cfg.frames.max_frames:
+            keep = np.random.default_rng(cfg.seed).choice(len(frames), size=cfg.frames.max_frames, replace=False)
+            frames = frames[torch.from_numpy(np.sort(keep))]
+        return frames, meta
+    from mqa_rl.collectors.rollouts import dataset_fingerprint     # imports the simulator: not on a pack's GPU machine
+
+    ds = MQADataset(cfg.dataset)
+    frames = pretraining_frames(list(cfg.frames.stores), ds, max_frames=cfg.frames.max_frames, seed=cfg.seed)
+    return frames, {"classes": list(ds.classes), "camera_distance": float(ds.camera.distance),
+                    "dataset_sha256": dataset_fingerprint(ds.root), "stores": list(cfg.frames.stores)}
+
+
+def export_pack(cfg: DictConfig) -> Path:
+    """Write the frames that training would read (stores, max_frames, seed) to ``cfg.export_pack``."""
+    t0 = time.perf_counter()
+    frames, source = read_frames(cfg)
+    path = save_frame_pack(frames, cfg.export_pack, source)
+    print(f"{len(frames)} frames -> {path} ({path.stat().st_size / 1e6:.1f} MB, {time.perf_counter() - t0:.0f} s)")
+    return path
+
+
 def pretrain(cfg: DictConfig) -> dict:
     t = cfg.train
     if t.steps <= 0 or t.batch_size <= 0 or t.eval_interval <= 0 or cfg.checkpoint.interval_steps <= 0:
@@ -81,18 +109,21 @@ def pretrain(cfg: DictConfig) -> dict:
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
     device = torch.device(cfg.device)
-    ds = MQADataset(cfg.dataset)
     t0 = time.perf_counter()
-    frames = pretraining_frames(list(cfg.frames.stores), ds, max_frames=cfg.frames.max_frames, seed=cfg.seed)
+    frames, source = read_frames(cfg)
     val_mask = scene_split(frames, cfg.frames.val_fraction, cfg.seed)
     train_frames, val_frames = frames[~val_mask], frames[val_mask]
+    train_frames = train_frames.to(device)       # on a GPU the frames stay there (~0.35 MB each): no copy per step
     print(f"{len(train_frames)} training frames, {len(val_frames)} validation frames "
           f"({time.perf_counter() - t0:.0f} s to read)", flush=True)
 
-    encoder = FrameEncoder(tuple(cfg.encoder.channels), cfg.encoder.image_size, num_classes=1 + len(ds.classes))
-    heads = PretrainHeads(encoder.out_shape[0], num_classes=1 + len(ds.classes), width=cfg.heads.width)
-    loss = EncoderPretrainLoss(encoder, heads, camera_distance=ds.camera.distance,
-                               weights=OmegaConf.to_container(t.weights)).to(device)
+    num_classes = 1 + len(source["classes"])
+    encoder = FrameEncoder(tuple(cfg.encoder.channels), cfg.encoder.image_size, num_classes=num_classes,
+                           head_width=cfg.encoder.get("head_width", 0))
+    heads = PretrainHeads(encoder.out_shape[0], num_classes=num_classes, width=cfg.heads.width)
+    loss = EncoderPretrainLoss(encoder, heads, camera_distance=source["camera_distance"],
+                               weights=OmegaConf.to_container(t.weights),
+                               density_sigma=t.get("density_sigma", 0.0)).to(device)
     model = nn.ModuleDict({"encoder": encoder, "heads": heads})
     params = list(model.parameters())
     optim = torch.optim.Adam(params, lr=t.lr, weight_decay=t.weight_decay)
@@ -116,16 +147,16 @@ def pretrain(cfg: DictConfig) -> dict:
         OmegaConf.save(OmegaConf.create(config), tmp)
         os.replace(tmp, out / "config.yaml")
     logger = RunLogger(out, wandb=cfg.logger.wandb, project=cfg.logger.project, exp_name="vqa_encoder", config=config)
-    meta = {"dataset_sha256": dataset_fingerprint(ds.root), "classes": list(ds.classes), "frames": len(frames),
-            "stores": list(cfg.frames.stores)}
+    meta = {"dataset_sha256": source["dataset_sha256"], "classes": list(source["classes"]), "frames": len(frames),
+            "stores": list(source["stores"])}
 
     bar = tqdm(total=t.steps, initial=state["step"], unit="step", dynamic_ncols=True, disable=not cfg.logger.progress)
     window: dict[str, list[float]] = {}
     try:
         while state["step"] < t.steps:
             t_step = time.perf_counter()
-            batch = train_frames[torch.randint(len(train_frames), (t.batch_size,))]
-            batch = (augment(batch) if t.augment else batch).to(device)
+            batch = train_frames[torch.randint(len(train_frames), (t.batch_size,)).to(device)]
+            batch = augment(batch) if t.augment else batch
             td = loss(batch)
             total = sum(v for k, v in td.items() if k.startswith("loss_"))
             optim.zero_grad()
@@ -168,7 +199,10 @@ def pretrain(cfg: DictConfig) -> dict:
 @hydra.main(config_path="conf", config_name="pretrain_vqa_encoder", version_base="1.3")
 def main(cfg: DictConfig) -> None:
     exit_on_sigterm()
-    pretrain(cfg)
+    if cfg.get("export_pack"):
+        export_pack(cfg)
+    else:
+        pretrain(cfg)
 
 
 if __name__ == "__main__":

@@ -58,17 +58,19 @@ def check_config(cfg: DictConfig) -> None:
 
 
 def build_model(cfg: DictConfig, ds: MQADataset) -> tuple[VQAModel, dict]:
-    """The VQA for ``ds``'s vocabularies with the pretrained encoder (if given) loaded."""
+    """The VQA for ``ds``'s vocabularies with the pretrained encoder (if given) loaded; the encoder's
+    architecture (channels, head width) is the file's."""
     options = {k: cfg.vqa[k] for k in MODEL_OPTIONS}
+    encoder, encoder_meta = load_encoder(cfg.encoder.weights) if cfg.encoder.weights else (None, {})
+    if encoder is not None:
+        options.update(encoder_channels=encoder.channels, encoder_head_width=encoder.head_width)
     model = VQAModel(ds.vocab.itos, ds.answers, freeze_encoder=bool(cfg.encoder.freeze), encoder_classes=1 + len(ds.classes),
                      **options)
-    encoder_meta = {}
-    if cfg.encoder.weights:
-        encoder, encoder_meta = load_encoder(cfg.encoder.weights)
-        found = (encoder.image_size, encoder.channels, encoder.num_classes)
-        needed = (model.encoder.image_size, model.encoder.channels, model.encoder.num_classes)
+    if encoder is not None:
+        found = (encoder.image_size, encoder.num_classes)
+        needed = (model.encoder.image_size, model.encoder.num_classes)
         if found != needed:
-            raise ValueError(f"encoder {cfg.encoder.weights} has (image size, channels, classes) {found}, the VQA "
+            raise ValueError(f"encoder {cfg.encoder.weights} has (image size, classes) {found}, the VQA "
                              f"needs {needed}: pretrain it again for this dataset and vqa config")
         if encoder_meta.get("dataset_sha256") not in (None, dataset_fingerprint(ds.root)):
             warnings.warn(f"encoder {cfg.encoder.weights} was pretrained on another dataset", stacklevel=2)

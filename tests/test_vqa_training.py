@@ -16,6 +16,7 @@ from mqa_rl.losses.vqa import VQALoss
 from mqa_rl.modules.vqa import VQAModel, load_vqa, vqa_module
 from mqa_rl.modules.vqa_encoder import FrameEncoder, PretrainHeads, load_encoder, save_encoder
 from mqa_rl.training.checkpoint import CheckpointCorrupt
+from mqa_rl.training.frame_pack import load_frame_pack
 from mqa_rl.training.vqa_data import Batches, dihedral, encode_store, pretraining_frames
 
 TEXTS = ["How many cans are there in the bin?", "How many apples are there in the bin?"]
@@ -147,3 +148,64 @@ def test_pretrain_and_train_vqa_recipes_write_log_and_resume(small_dataset, answ
         train_vqa.train(compose_recipe_config("train_vqa", [*args, "train.steps=12", "resume=true"]))
     with pytest.raises(FileNotFoundError, match="collect"):
         train_vqa.train(compose_recipe_config("train_vqa", [*args, "system=privileged"]))
+
+
+def test_frame_pack_carries_the_frames_losslessly_and_pretrains_without_the_dataset(small_dataset, answering_root, tmp_path):
+    root, overrides = answering_root
+    quiet = ["logger.wandb=false", "logger.progress=false"]
+    pretrain = load_recipe("pretrain_vqa_encoder")
+    pack = tmp_path / "frames.xz"
+    pretrain.export_pack(compose_recipe_config("pretrain_vqa_encoder", [*overrides, f"export_pack={pack}",
+                                                                        "frames.max_frames=6"]))
+    frames, meta = load_frame_pack(pack)
+    expected = pretraining_frames([root / "rollouts" / "counting" / "random" / "train"], small_dataset, max_frames=6, seed=0)
+    for key in (keys.RGB, keys.DEPTH, keys.OBJECT_MAP, keys.CLASS_MAP, keys.SCENE, keys.LEVEL):
+        assert torch.equal(frames[key], expected[key]), key                 # bit-exact
+    assert meta["classes"] == list(small_dataset.classes) and meta["camera_distance"] == small_dataset.camera.distance
+    # trains from the pack alone: the dataset path points nowhere
+    out = tmp_path / "encoder_from_pack"
+    summary = pretrain.pretrain(compose_recipe_config("pretrain_vqa_encoder", [
+        *overrides, *quiet, f"frames.pack={pack}", f"dataset={tmp_path / 'no_dataset'}", f"out_dir={out}",
+        "train.steps=2", "train.batch_size=2", "train.eval_interval=1"]))
+    _, encoder_meta = load_encoder(out / "encoder.pt")
+    assert summary["steps"] == 2 and encoder_meta["dataset_sha256"] == meta["dataset_sha256"]
+    assert encoder_meta["classes"] == list(small_dataset.classes)
+    # nothing half-written is taken for a pack
+    broken = tmp_path / "broken.xz"
+    broken.write_bytes(pack.read_bytes()[: pack.stat().st_size // 2])
+    with pytest.raises(ValueError, match="export_pack"):
+        load_frame_pack(broken)
+    with pytest.raises(FileNotFoundError, match="export_pack"):
+        load_frame_pack(tmp_path / "none.xz")
+
+
+def test_encoder_head_width_gives_the_heads_context_and_the_vqa_takes_the_files_architecture(small_dataset, tmp_path):
+    torch.manual_seed(0)
+    k = 1 + len(small_dataset.classes)
+    encoder = FrameEncoder((8, 16, 32, 32), num_classes=k, head_width=16)
+    x = torch.randn(2, 3, 224, 224)
+    maps = encoder.class_maps(x)
+    assert maps.shape == (2, 2 * k, 24, 24) and bool((maps[:, k:] >= 0).all())    # log-probs, then densities ≥ 0
+    mid, bottleneck = encoder.features(x)
+    torch.testing.assert_close(encoder.heads_of(mid, bottleneck)[1], encoder.heads_of(mid)[1])
+    path = save_encoder(encoder, tmp_path / "encoder.pt", {"classes": list(small_dataset.classes)})
+    again, _ = load_encoder(path)
+    assert again.head_width == 16
+    torch.testing.assert_close(again.eval().class_maps(x), encoder.eval().class_maps(x))
+    train_vqa = load_recipe("train_vqa")
+    cfg = compose_recipe_config("train_vqa", [f"dataset={small_dataset.root}", f"encoder.weights={path}", "vqa=classes"])
+    model, _ = train_vqa.build_model(cfg, small_dataset)
+    assert model.config["encoder_head_width"] == 16
+    torch.testing.assert_close(model.encoder.eval().class_maps(x), encoder.class_maps(x))
+
+
+def test_density_targets_spread_by_a_gaussian_keep_their_mass(small_dataset):
+    k = 1 + len(small_dataset.classes)
+    loss = EncoderPretrainLoss(FrameEncoder(num_classes=k), PretrainHeads(32, k), camera_distance=2.0, density_sigma=1.0)
+    delta = torch.zeros(1, k, 24, 24)
+    delta[0, 3, 12, 12] = 1.0
+    spread = loss.blur(delta)
+    assert abs(float(spread.sum()) - 1.0) < 1e-5 and float(spread[0, 3, 12, 12]) < 0.2
+    assert float(spread[0, 3, 12, 13]) == pytest.approx(float(spread[0, 3, 13, 12]))   # isotropic
+    plain = EncoderPretrainLoss(FrameEncoder(num_classes=k), PretrainHeads(32, k), camera_distance=2.0)
+    assert torch.equal(plain.blur(delta), delta)

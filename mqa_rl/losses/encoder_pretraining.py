@@ -5,7 +5,8 @@ background + the dataset's classes), all at the heads' 56 px; and (ours) on the 
 24 × 24 map, through the encoder's own heads, the class areas of each cell (``class_head``,
 cross-entropy against the area fractions) and a density map per class (``density_head``: one unit
 of mass in the cell of every object with at least ``min_visible_px`` visible pixels, at its visible
-pixels' centroid; squared error per cell plus the error of the per-class sums, i.e. the counts).
+pixels' centroid, optionally spread by a Gaussian of ``density_sigma`` cells; squared error per cell
+plus the error of the per-class sums, i.e. the counts).
 It also reports the pixel accuracy of the class map on object pixels, the cells' accuracy (their
 largest class), how often the rounded density sum equals the count of a class present in the frame
 (``count_exact``), and the height error in metres (not differentiated).
@@ -44,7 +45,7 @@ class EncoderPretrainLoss(LossModule):
                 "count_exact", "height_error_m"]
 
     def __init__(self, encoder: FrameEncoder, heads: PretrainHeads, *, camera_distance: float, depth_scale: float = 0.1,
-                 weights: dict | None = None, min_visible_px: int = 20):
+                 weights: dict | None = None, min_visible_px: int = 20, density_sigma: float = 0.0):
         super().__init__()
         self.encoder = encoder
         self.heads = heads
@@ -52,6 +53,7 @@ class EncoderPretrainLoss(LossModule):
         self.depth_scale = float(depth_scale)
         self.weights = {"rgb": 1.0, "height": 1.0, "class": 1.0, "cells": 1.0, "density": 1.0, **(weights or {})}
         self.min_visible_px = int(min_visible_px)
+        self.density_sigma = float(density_sigma)
 
     def _forward_value_estimator_keys(self, **kwargs) -> None:
         pass
@@ -100,15 +102,30 @@ class EncoderPretrainLoss(LossModule):
         target.scatter_add_(1, cls_of * (h * w) + iy * w + ix, valid.float())
         return target.view(b, self.encoder.num_classes, h, w)
 
+    def blur(self, density: torch.Tensor) -> torch.Tensor:
+        """The per-cell targets spread by a Gaussian of ``density_sigma`` cells (crowd counting's usual
+        target: a unit in one cell is a needle to hit); 0 = unchanged."""
+        if self.density_sigma <= 0:
+            return density
+        r = max(1, int(3 * self.density_sigma + 0.5))
+        g = torch.exp(-0.5 * (torch.arange(-r, r + 1, device=density.device, dtype=density.dtype) / self.density_sigma) ** 2)
+        g = g / g.sum()
+        b, k, h, w = density.shape
+        x = density.reshape(b * k, 1, h, w)
+        x = F.conv2d(F.pad(x, (r, r, 0, 0)), g.view(1, 1, 1, -1))
+        x = F.conv2d(F.pad(x, (0, 0, r, r)), g.view(1, 1, -1, 1))
+        return x.view(b, k, h, w)
+
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         x = standardise(tensordict.get(self.tensor_keys.rgb), self.encoder.image_size)
         mid, feat = self.encoder.features(x)
         rgb_hat, height_hat, class_logits = self.heads(feat)
         rgb, height, classes = self.targets(tensordict)
-        cell_logits, density = self.encoder.heads_of(mid)
+        cell_logits, density = self.encoder.heads_of(mid, feat)
         cells = self.cell_targets(tensordict, cell_logits.shape[-2:])
         objects = self.density_targets(tensordict, density.shape[-2:])
         counts, true_counts = density.sum((-2, -1)), objects.sum((-2, -1))
+        objects = self.blur(objects)
         b, k = counts.shape
         out = {"loss_rgb": self.weights["rgb"] * F.mse_loss(rgb_hat, rgb),
                "loss_height": self.weights["height"] * F.l1_loss(height_hat, height),

@@ -117,8 +117,8 @@ class VQAModel(nn.Module):
     """Two-frame VQA (see the module docstring). Build with ``VQAModel(vocab, answers, **config)``."""
 
     def __init__(self, vocab, answers, *, image_size: int = 224, encoder_channels=(8, 16, 32, 32), encoder_classes: int = 21,
-                 pool: str = "eqa", dim: int = 64, lstm_layers: int = 2, dropout: float = 0.5, cell_heads: int = 4,
-                 freeze_encoder: bool = True):
+                 encoder_head_width: int = 0, pool: str = "eqa", dim: int = 64, lstm_layers: int = 2, dropout: float = 0.5,
+                 cell_heads: int = 4, freeze_encoder: bool = True):
         super().__init__()
         self.vocab = list(vocab)
         self.answers = list(answers)
@@ -127,11 +127,11 @@ class VQAModel(nn.Module):
         if pool not in POOLS:
             raise ValueError(f"vqa pool={pool!r}; choose one of {POOLS}")
         self.config = {"image_size": int(image_size), "encoder_channels": list(encoder_channels),
-                       "encoder_classes": int(encoder_classes), "pool": pool,
+                       "encoder_classes": int(encoder_classes), "encoder_head_width": int(encoder_head_width), "pool": pool,
                        "dim": int(dim), "lstm_layers": int(lstm_layers), "dropout": float(dropout),
                        "cell_heads": int(cell_heads), "freeze_encoder": bool(freeze_encoder)}
         self._stoi = {w: i for i, w in enumerate(self.vocab)}
-        self.encoder = FrameEncoder(tuple(encoder_channels), image_size, encoder_classes)
+        self.encoder = FrameEncoder(tuple(encoder_channels), image_size, encoder_classes, encoder_head_width)
         c, h, w = self.encoder.out_shape
         self.pool = pool
         if pool == "eqa":

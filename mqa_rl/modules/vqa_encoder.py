@@ -56,7 +56,7 @@ class FrameEncoder(nn.Module):
     24 at 224 px) to per-cell class logits and per-class object densities (background + the dataset's
     classes): pretraining supervises them, and the VQA's ``pool="classes"`` reads them."""
 
-    def __init__(self, channels=(8, 16, 32, 32), image_size: int = 224, num_classes: int = 21):
+    def __init__(self, channels=(8, 16, 32, 32), image_size: int = 224, num_classes: int = 21, head_width: int = 0):
         super().__init__()
         layers, cin = [], 3
         for cout in channels:
@@ -72,8 +72,17 @@ class FrameEncoder(nn.Module):
             raise ValueError(f"image_size={image_size} is too small for {len(channels)} conv 5×5 + pool blocks")
         self.out_shape = (cin, size, size)
         self.num_classes = int(num_classes)
-        self.class_head = nn.Conv2d(channels[-2], self.num_classes, 1)
-        self.density_head = nn.Conv2d(channels[-2], self.num_classes, 1)
+        self.head_width = int(head_width)
+        if self.head_width < 0:
+            raise ValueError(f"head_width must be ≥ 0, got {head_width}")
+        head_in = channels[-2]
+        self.head_trunk = None
+        if self.head_width:        # context for the heads: two 3×3 convs over the map and the upsampled bottleneck
+            self.head_trunk = nn.Sequential(nn.Conv2d(channels[-2] + cin, self.head_width, 3, padding=1), nn.ReLU(inplace=True),
+                                            nn.Conv2d(self.head_width, self.head_width, 3, padding=1), nn.ReLU(inplace=True))
+            head_in = self.head_width
+        self.class_head = nn.Conv2d(head_in, self.num_classes, 1)
+        self.density_head = nn.Conv2d(head_in, self.num_classes, 1)
         nn.init.constant_(self.density_head.bias, -6.0)      # softplus(-6) ≈ 0.0025: ~1.4 objects per class at first
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
@@ -84,8 +93,14 @@ class FrameEncoder(nn.Module):
         mid = self.net[: 4 * (len(self.channels) - 1)](x)
         return mid, self.net[4 * (len(self.channels) - 1):](mid)
 
-    def heads_of(self, mid: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """(class logits, object densities ≥ 0), each [B, K, 24, 24], from the third block's map."""
+    def heads_of(self, mid: torch.Tensor, bottleneck: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """(class logits, object densities ≥ 0), each [B, K, 24, 24], from the third block's map (and, with
+        ``head_width``, the bottleneck: computed from ``mid`` when not given)."""
+        if self.head_trunk is not None:
+            if bottleneck is None:
+                bottleneck = self.net[4 * (len(self.channels) - 1):](mid)
+            up = F.interpolate(bottleneck, size=mid.shape[-2:], mode="bilinear", align_corners=False)
+            mid = self.head_trunk(torch.cat([mid, up], 1))
         return self.class_head(mid), F.softplus(self.density_head(mid))
 
     def class_maps(self, x: torch.Tensor) -> torch.Tensor:
@@ -137,7 +152,7 @@ def save_encoder(encoder: FrameEncoder, path: str | Path, meta: dict) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     blob = {"format": ENCODER_FORMAT, "version": ENCODER_VERSION,
             "config": {"channels": list(encoder.channels), "image_size": encoder.image_size,
-                       "num_classes": encoder.num_classes},
+                       "num_classes": encoder.num_classes, "head_width": encoder.head_width},
             "state_dict": {k: v.detach().cpu() for k, v in encoder.state_dict().items()}, "meta": dict(meta)}
     tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
     torch.save(blob, tmp)
@@ -161,7 +176,8 @@ def load_encoder(path: str | Path) -> tuple[FrameEncoder, dict]:
     if int(blob.get("version", 0)) > ENCODER_VERSION:
         raise ValueError(f"{path} has encoder format version {blob['version']} > {ENCODER_VERSION}: update mqa_rl")
     cfg = blob["config"]
-    encoder = FrameEncoder(tuple(cfg["channels"]), int(cfg["image_size"]), int(cfg.get("num_classes", 21)))
+    encoder = FrameEncoder(tuple(cfg["channels"]), int(cfg["image_size"]), int(cfg.get("num_classes", 21)),
+                           int(cfg.get("head_width", 0)))
     try:
         encoder.load_state_dict(blob["state_dict"])
     except RuntimeError as error:
