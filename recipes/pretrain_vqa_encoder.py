@@ -5,7 +5,7 @@ above the bin floor (depth), all from the CNN's 32×10×10 bottleneck.
     python recipes/collect_rollouts.py system=random splits=[train]    # the frames come from these rollouts
     python recipes/pretrain_vqa_encoder.py
     python recipes/pretrain_vqa_encoder.py resume=true                 # continue a killed run
-    python recipes/pretrain_vqa_encoder.py export_pack=runs/frames.xz  # the frames in one file (~16 kB each) ...
+    python recipes/pretrain_vqa_encoder.py export_pack=runs/frames.xz  # the frames in one file (~21 kB each) ...
     python recipes/pretrain_vqa_encoder.py frames.pack=runs/frames.xz device=cuda   # ... to train on a GPU machine
 
 Writes ``out_dir/encoder.pt`` (the encoder with the lowest validation loss on held-out scenes; what

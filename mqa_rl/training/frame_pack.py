@@ -4,7 +4,7 @@ Rendering needs the simulator (CPU); pretraining wants a GPU. A pack carries the
 machine to the other: ``recipes/pretrain_vqa_encoder.py export_pack=frames.xz`` writes it from the
 rollout stores, ``frames.pack=frames.xz`` trains from it on a machine that has neither the stores nor
 the dataset (the pack holds what the recipe reads from them: the classes, the camera distance and
-the dataset's fingerprint). ~16 kB per frame (xz over rgb uint8, depth float16, object and class
+the dataset's fingerprint). ~21 kB per frame (xz over rgb uint8, depth float16, object and class
 maps), against ~0.58 MB per rollout episode in a store.
 """
 
