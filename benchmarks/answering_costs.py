@@ -27,7 +27,7 @@ from mqa_rl.modules.vqa_encoder import FrameEncoder, PretrainHeads
 DEVICE = torch.device("cpu")
 
 
-def cpu(fn, repeat: int = 1) -> float:
+def seconds(fn, repeat: int = 1) -> float:
     """Seconds per call, after one warm-up call: CPU seconds on the CPU, wall seconds (synchronised) on a GPU."""
     fn()
     if DEVICE.type == "cuda":
@@ -70,7 +70,7 @@ def learning_costs(ds: MQADataset) -> None:
     img = torch.randint(0, 256, (64, 3, 224, 224), dtype=torch.uint8, device=DEVICE)
     model = VQAModel(ds.vocab.itos, ds.answers).eval().to(DEVICE)
     with torch.no_grad():
-        encode = cpu(lambda: model.encode_frames(img)) / 64
+        encode = seconds(lambda: model.encode_frames(img)) / 64
     print(f"encode one frame (frozen encoder, no grad, batch 64): {encode * 1e3:.2f} m{unit}")
     q = torch.tensor([list(ds.questions[0].tokens)] * 64, device=DEVICE)
     labels = torch.zeros(64, dtype=torch.int64, device=DEVICE)
@@ -87,14 +87,14 @@ def learning_costs(ds: MQADataset) -> None:
             loss(batch)["loss_vqa"].backward()
             opt.step()
 
-        print(f"VQA update, batch 64, frozen encoder ({pool}): {cpu(step, 10) * 1e3:.1f} m{unit}")
+        print(f"VQA update, batch 64, frozen encoder ({pool}): {seconds(step, 10) * 1e3:.1f} m{unit}")
     model = VQAModel(ds.vocab.itos, ds.answers, freeze_encoder=False).train().to(DEVICE)
     loss = VQALoss(vqa_module(model))
     for n in (16, 64):     # the recipe's batch is 64
         batch = TensorDict({keys.QUESTION: q[:n], keys.FIRST_RGB: img[:n], keys.LAST_RGB: img[:n],
                             keys.ANSWER_LABEL: labels[:n]}, batch_size=[n])
         print(f"VQA update, batch {n}, fine-tuned encoder: "
-              f"{cpu(lambda: loss(batch)['loss_vqa'].backward(), 2):.3f} {unit}")
+              f"{seconds(lambda: loss(batch)['loss_vqa'].backward(), 2):.3f} {unit}")
     enc = FrameEncoder(num_classes=1 + len(ds.classes))
     pre = EncoderPretrainLoss(enc, PretrainHeads(32, 1 + len(ds.classes)), camera_distance=ds.camera.distance).to(DEVICE)
     for n in (16, 32):     # the recipe's batch is 32
@@ -106,7 +106,7 @@ def learning_costs(ds: MQADataset) -> None:
             out = pre(frames)
             sum(v for k, v in out.items() if k.startswith("loss_")).backward()
 
-        print(f"encoder pretraining update, batch {n}: {cpu(pre_step, 2):.3f} {unit}")
+        print(f"encoder pretraining update, batch {n}: {seconds(pre_step, 2):.3f} {unit}")
 
 
 def main() -> None:

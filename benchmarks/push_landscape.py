@@ -28,6 +28,7 @@ import torch
 from mqa_rl import keys
 from mqa_rl.envs import actions
 from mqa_rl.envs.sapien_bin import SapienBinEnv
+from mqa_rl.evaluation.episode_metrics import mean_ci95
 from mqa_rl.modules.privileged_policy import PrivilegedPushPolicy
 
 
@@ -45,10 +46,6 @@ def candidates(teacher_push: int, mask: np.ndarray, rng: np.random.Generator, n_
                                                if (dr or dc) and 0 <= r + dr < actions.GRID and 0 <= c + dc < actions.GRID],
         "random (action mask)": [int(a) for a in rng.choice(np.flatnonzero(mask), n_random, replace=False)],
     }
-
-
-def mean_ci(values: np.ndarray) -> tuple[float, float]:
-    return float(values.mean()), float(1.96 * values.std(ddof=1) / np.sqrt(len(values))) if len(values) > 1 else 0.0
 
 
 def main() -> None:
@@ -94,8 +91,8 @@ def main() -> None:
         per_state = np.array([r[name].mean() for r in rows])
         best = np.array([r[name].min() for r in rows])
         every = np.concatenate([r[name] for r in rows])
-        m, h = mean_ci(per_state)
-        bm, bh = mean_ci(best)
+        m, h, _ = mean_ci95(torch.from_numpy(per_state))
+        bm, bh, _ = mean_ci95(torch.from_numpy(best))
         print(f"{name:36s} {len(every):6d} {m:+.3f} ± {h:.3f}    {np.mean(every < -0.05):9.2f} "
               f"{np.mean(every > 0.05):9.2f} {bm:+.3f} ± {bh:.3f}")
 

@@ -26,7 +26,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from mqa_rl import keys
 from mqa_rl.collectors.demonstrations import DEMOS_META, collect_demonstrations
-from mqa_rl.collectors.rollouts import dataset_fingerprint
+from mqa_rl.data.dataset import dataset_fingerprint
 from mqa_rl.envs import actions
 from mqa_rl.envs.sapien_bin import SapienBinEnv
 from mqa_rl.modules.trained_policy import load_greedy

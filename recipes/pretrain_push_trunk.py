@@ -41,7 +41,7 @@ from tqdm import tqdm  # noqa: E402
 
 from mqa_rl import keys  # noqa: E402
 from mqa_rl.collectors.class_frames import collect_class_frames  # noqa: E402
-from mqa_rl.collectors.rollouts import dataset_fingerprint  # noqa: E402
+from mqa_rl.data.dataset import dataset_fingerprint  # noqa: E402
 from mqa_rl.data import MQADataset  # noqa: E402
 from mqa_rl.envs.sapien_bin import SapienBinEnv  # noqa: E402
 from mqa_rl.evaluation.answering_report import write_atomic  # noqa: E402

@@ -34,6 +34,7 @@ from tqdm import tqdm  # noqa: E402
 
 from mqa_rl import keys  # noqa: E402
 from mqa_rl.data import MQADataset  # noqa: E402
+from mqa_rl.data.dataset import dataset_fingerprint  # noqa: E402
 from mqa_rl.evaluation.answering_report import write_atomic  # noqa: E402
 from mqa_rl.losses.encoder_pretraining import EncoderPretrainLoss  # noqa: E402
 from mqa_rl.modules.vqa_encoder import FrameEncoder, PretrainHeads, save_encoder  # noqa: E402
@@ -74,14 +75,12 @@ def validate(loss: EncoderPretrainLoss, frames: TensorDict, device, batch_size: 
 def read_frames(cfg: DictConfig) -> tuple[TensorDict, dict]:
     """The frames, and what the recipe needs of their dataset (classes, camera distance, fingerprint,
     stores): from the rollout stores and the dataset, or from a frame pack (``frames.pack``) alone."""
-    if cfg.frames.get("pack"):
+    if cfg.frames.pack:
         frames, meta = load_frame_pack(cfg.frames.pack)
         if cfg.frames.max_frames is not None and len(frames) > cfg.frames.max_frames:
             keep = np.random.default_rng(cfg.seed).choice(len(frames), size=cfg.frames.max_frames, replace=False)
             frames = frames[torch.from_numpy(np.sort(keep))]
         return frames, meta
-    from mqa_rl.collectors.rollouts import dataset_fingerprint     # imports the simulator: not on a pack's GPU machine
-
     ds = MQADataset(cfg.dataset)
     frames = pretraining_frames(list(cfg.frames.stores), ds, max_frames=cfg.frames.max_frames, seed=cfg.seed)
     return frames, {"classes": list(ds.classes), "camera_distance": float(ds.camera.distance),
@@ -119,11 +118,11 @@ def pretrain(cfg: DictConfig) -> dict:
 
     num_classes = 1 + len(source["classes"])
     encoder = FrameEncoder(tuple(cfg.encoder.channels), cfg.encoder.image_size, num_classes=num_classes,
-                           head_width=cfg.encoder.get("head_width", 0))
+                           head_width=cfg.encoder.head_width)
     heads = PretrainHeads(encoder.out_shape[0], num_classes=num_classes, width=cfg.heads.width)
     loss = EncoderPretrainLoss(encoder, heads, camera_distance=source["camera_distance"],
                                weights=OmegaConf.to_container(t.weights),
-                               density_sigma=t.get("density_sigma", 0.0)).to(device)
+                               density_sigma=t.density_sigma).to(device)
     model = nn.ModuleDict({"encoder": encoder, "heads": heads})
     params = list(model.parameters())
     optim = torch.optim.Adam(params, lr=t.lr, weight_decay=t.weight_decay)
@@ -199,7 +198,7 @@ def pretrain(cfg: DictConfig) -> dict:
 @hydra.main(config_path="conf", config_name="pretrain_vqa_encoder", version_base="1.3")
 def main(cfg: DictConfig) -> None:
     exit_on_sigterm()
-    if cfg.get("export_pack"):
+    if cfg.export_pack:
         export_pack(cfg)
     else:
         pretrain(cfg)

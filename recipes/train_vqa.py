@@ -31,7 +31,7 @@ from omegaconf import DictConfig, OmegaConf  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
 from mqa_rl import keys  # noqa: E402
-from mqa_rl.collectors.rollouts import dataset_fingerprint  # noqa: E402
+from mqa_rl.data.dataset import dataset_fingerprint  # noqa: E402
 from mqa_rl.collectors.store import read_meta  # noqa: E402
 from mqa_rl.data import MQADataset  # noqa: E402
 from mqa_rl.data.dataset import LEVELS  # noqa: E402

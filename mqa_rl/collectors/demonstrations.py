@@ -19,7 +19,7 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type
 from tqdm import tqdm
 
 from mqa_rl import keys
-from mqa_rl.collectors.rollouts import dataset_fingerprint
+from mqa_rl.data.dataset import dataset_fingerprint
 from mqa_rl.losses.replay import OBS_KEYS
 from mqa_rl.modules.privileged_policy import PrivilegedPushPolicy
 

@@ -31,7 +31,7 @@ from torchrl.envs.utils import set_exploration_type
 from tqdm import tqdm
 
 from mqa_rl import keys
-from mqa_rl.data.dataset import LEVELS, MQADataset
+from mqa_rl.data.dataset import LEVELS, MQADataset, dataset_fingerprint
 from mqa_rl.data.questions import QUESTION_TYPES
 from mqa_rl.collectors.store import EpisodeStore
 from mqa_rl.envs.sapien_bin import SapienBinEnv
@@ -40,11 +40,6 @@ from mqa_rl.transforms.episode_stats import mean_target_chi
 
 SCHEMA = 1
 IN_PROCESS_BELOW = 8             # fewer episodes than this to collect: no worker processes
-
-
-def dataset_fingerprint(root: str | Path) -> str:
-    """SHA-256 of the dataset's manifest (which lists the SHA-256 of every file)."""
-    return hashlib.sha256((Path(root) / "manifest.json").read_bytes()).hexdigest()
 
 
 def plan_questions(dataset: MQADataset, split: str, question_types, levels=None, max_per_group: int | None = None,

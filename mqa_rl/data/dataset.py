@@ -7,6 +7,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 from collections import Counter
@@ -320,3 +321,8 @@ class MQADataset:
         rows.append(f"  vocabulary: {len(self.vocab)} words, answers {list(self.answers)}")
         rows.append(format_statistics(self.stats))
         return "\n".join(rows)
+
+
+def dataset_fingerprint(root: str | Path) -> str:
+    """SHA-256 of the dataset's manifest (which lists the SHA-256 of every file)."""
+    return hashlib.sha256((Path(root) / "manifest.json").read_bytes()).hexdigest()
