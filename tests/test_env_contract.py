@@ -4,10 +4,13 @@ import pytest
 import torch
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from tensordict import TensorDict
+from torchrl.envs import TransformedEnv
 
 from mqa_rl import keys
 from mqa_rl.envs import actions
 from mqa_rl.envs.sapien_bin import SapienBinEnv
+from mqa_rl.transforms.push_memory import PushMemory
 
 CHEAP = settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 
@@ -62,6 +65,16 @@ def test_rollout_without_breaking_on_done_resets_by_itself(env):
 def test_reset_question_must_be_one_integer_in_range(env, value):
     with pytest.raises(ValueError, match="reset_question"):
         env.reset(env.reset().empty().set(keys.RESET_QUESTION, value))
+
+
+def test_reset_question_reaches_the_env_through_transforms(env):
+    # TransformedEnv passes on only the reset keys and declared state: reset_question is declared state.
+    wrapped = TransformedEnv(env, PushMemory(1))
+    for index in (1, 0, len(env.dataset.questions) - 1):
+        td = wrapped.reset(TensorDict({keys.RESET_QUESTION: torch.tensor([index])}, []))
+        assert env.question.id == env.dataset.questions[index].id
+        assert td[keys.QUESTION_INDEX].item() == index
+        assert td[keys.RESET_QUESTION].item() == -1      # an auto-reset from this state picks at random
 
 
 def test_action_message_reads_naturally(env):

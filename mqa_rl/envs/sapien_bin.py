@@ -146,6 +146,9 @@ class SapienBinEnv(EnvBase):
             info=info,
         )
         self.action_spec = Categorical(actions.NUM_ACTIONS, shape=(), dtype=i64)
+        # An input of reset only (never returned): declared as state so that a TransformedEnv passes it on.
+        self.state_spec = Composite({keys.RESET_QUESTION: Bounded(-1, len(self.dataset.questions) - 1,
+                                                                  shape=(1,), dtype=i64)})
         self.reward_spec = Unbounded(shape=(1,), dtype=f32)
         self.done_spec = Composite(
             done=Categorical(2, shape=(1,), dtype=torch.bool),
@@ -192,7 +195,8 @@ class SapienBinEnv(EnvBase):
         self._tokens = tokens
         obs = self._observe(None)
         self._last = obs
-        return obs
+        # The state the next reset reads unless told otherwise: -1, a random question (auto-resets stay random).
+        return obs.clone(False).set(keys.RESET_QUESTION, torch.full((1,), -1, dtype=torch.int64))
 
     # ------------------------------------------------------------------------------------ step
     def _validate_action(self, tensordict: TensorDictBase) -> int:
