@@ -113,3 +113,22 @@ def test_a_damaged_checkpoint_gives_a_clear_error(tmp_path):
     shutil.rmtree(path)
     with pytest.raises(FileNotFoundError, match="no checkpoint"):
         b["ckpt"].load()
+
+
+def test_an_unreadable_newest_checkpoint_is_named_not_skipped(tmp_path):
+    a = build(tmp_path, "a", seed=0)
+    train_a_little(a)
+    older = a["ckpt"].save()
+    a["state"]["frames"] = 20
+    newest = a["ckpt"].save()
+    assert a["ckpt"].latest() == newest
+    (newest / "manifest.json").write_text("{ not json")
+    # resuming from the older one silently would repeat frames; the user decides, told which to delete
+    with pytest.raises(CheckpointCorrupt, match=f"{newest.name}.*newest readable one is {older.name}.*delete"):
+        a["ckpt"].latest()
+    (older / "manifest.json").unlink()
+    with pytest.raises(CheckpointCorrupt, match=f"{older.name}.*{newest.name}.*cannot be read"):
+        a["ckpt"].latest()                                   # none readable: never "no checkpoint, start afresh"
+    shutil.rmtree(newest)
+    shutil.rmtree(older)
+    assert a["ckpt"].latest() is None

@@ -32,6 +32,7 @@ from mqa_rl.modules.privileged_policy import PrivilegedPushPolicy
 from mqa_rl.modules.push_policy import make_explorer
 from mqa_rl.modules.trained_policy import load_greedy
 from mqa_rl.modules.random_policy import RandomMQAPolicy
+from mqa_rl.training.checkpoint import newest_checkpoint
 
 KINDS = ("random", "random_masked", "none", "dqn", "privileged")
 PRIVILEGED_OPTIONS = ("min_visible_px", "min_visible_fraction", "max_tries_per_occluder", "lookahead", "order",
@@ -98,8 +99,7 @@ def resolve_checkpoint(spec: Mapping) -> dict:
     if not (run / "config.yaml").exists():
         raise FileNotFoundError(f"{run / 'config.yaml'} not found: train the policy first "
                                 f"(python recipes/train_dqn.py out_dir={run} reward=...)")
-    rotation = CheckpointRotation(run / "checkpoints", keep_last=1)
-    latest = rotation.latest() if rotation.directory.exists() else None
+    latest = newest_checkpoint(CheckpointRotation(run / "checkpoints", keep_last=1))
     if latest is None:
         raise FileNotFoundError(f"no checkpoint in {run / 'checkpoints'}: train the policy first")
     return {**spec, "checkpoint": str(latest)}

@@ -15,7 +15,7 @@ from torchrl.checkpoint import Checkpoint, CheckpointRotation
 
 from mqa_rl import keys
 from mqa_rl.modules.push_policy import make_push_qnet, make_q_actor
-from mqa_rl.training.checkpoint import CheckpointCorrupt, IntegrityAdapter
+from mqa_rl.training.checkpoint import CheckpointCorrupt, IntegrityAdapter, newest_checkpoint
 
 
 def run_checkpoints(run: str | Path) -> list[Path]:
@@ -41,8 +41,7 @@ def load_greedy(run: str | Path, checkpoint: str | Path | None, env):
     actor = make_q_actor(net, env.action_spec, masked=cfg.action_mask)
     path = Path(checkpoint) if checkpoint else None
     if path is None:
-        rotation = CheckpointRotation(run / "checkpoints", keep_last=1)
-        path = rotation.latest() if rotation.directory.exists() else None
+        path = newest_checkpoint(CheckpointRotation(run / "checkpoints", keep_last=1))
         if path is None:
             raise FileNotFoundError(f"no checkpoint in {run / 'checkpoints'}: train first, or give checkpoint=...")
     try:

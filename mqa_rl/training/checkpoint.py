@@ -95,7 +95,7 @@ class TrainingCheckpoint:
         return self.rotation.save(self.checkpoint, step=int(self.state["frames"]))
 
     def latest(self) -> Path | None:
-        return self.rotation.latest() if self.directory.exists() else None
+        return newest_checkpoint(self.rotation)
 
     def load(self, path: str | Path | None = None) -> Path:
         """Restore every component from ``path`` (default: the newest checkpoint) in place, into a
@@ -115,6 +115,29 @@ class TrainingCheckpoint:
             self.target_updater.counter = int(self.state.get("target_updater_counter", 0))
         self.beta_counter.fill_(int(self.state.get("beta_steps", 0)))
         return path
+
+
+def newest_checkpoint(rotation: CheckpointRotation) -> Path | None:
+    """The newest checkpoint of ``rotation``; ``CheckpointCorrupt`` if a newer one on disk cannot be read (no
+    valid manifest), rather than silently resuming from an older one or starting afresh over a run's logs."""
+    directory = Path(rotation.directory)
+    if not directory.exists():
+        return None
+    latest = rotation.latest()
+
+    def step(path: Path) -> int:          # checkpoint-<step>[.torchrl]; -1: not a checkpoint name
+        text = path.name.removesuffix(".torchrl").removeprefix(f"{rotation.prefix}-")
+        return int(text) if text.isdigit() else -1
+
+    floor = step(latest) if latest is not None else -1
+    unreadable = sorted((p for p in directory.glob(f"{rotation.prefix}-*") if step(p) > floor), key=step)
+    if unreadable:
+        names = [p.name for p in unreadable]
+        older = f"; the newest readable one is {latest.name}" if latest is not None else ""
+        raise CheckpointCorrupt(f"{directory} holds {names}, which cannot be read (no valid manifest){older}: "
+                                f"delete {names} to resume from an older checkpoint or start afresh, "
+                                f"or choose another out_dir")
+    return latest
 
 
 def restore_verified(checkpoint, path: Path, hint: str) -> None:

@@ -14,7 +14,7 @@ from torch import nn
 from torch.optim import Optimizer
 from torchrl.checkpoint import Checkpoint, CheckpointRotation, GlobalRNGState
 
-from mqa_rl.training.checkpoint import INTEGRITY, CheckpointCorrupt, IntegrityAdapter, restore_verified
+from mqa_rl.training.checkpoint import INTEGRITY, CheckpointCorrupt, IntegrityAdapter, newest_checkpoint, restore_verified
 
 
 class ModelCheckpoint:
@@ -30,15 +30,7 @@ class ModelCheckpoint:
         return self.rotation.save(self.checkpoint, step=int(step))
 
     def latest(self) -> Path | None:
-        """The newest readable checkpoint; ``CheckpointCorrupt`` if there are checkpoints but none can be
-        read (rather than silently starting afresh over a run's logs)."""
-        latest = self.rotation.latest() if self.directory.exists() else None
-        if latest is None and self.directory.exists():
-            found = sorted(p.name for p in self.directory.glob("checkpoint-*"))
-            if found:
-                raise CheckpointCorrupt(f"{self.directory} holds {found} but none can be read (no valid manifest): "
-                                        f"delete them to start afresh, or choose another out_dir")
-        return latest
+        return newest_checkpoint(self.rotation)
 
     def load(self, path: str | Path | None = None) -> Path:
         """Restore every component in place from ``path`` (default: the newest checkpoint)."""
