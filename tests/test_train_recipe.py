@@ -67,6 +67,19 @@ def test_tiny_training_run_evaluation_and_curves(small_dataset_dir, tmp_path):
     assert json.loads((ev3 / "results.json").read_text())["easy"]["visible_teacher"]["pushes"]["n"] == 2
     _run(str(ROOT / "recipes" / "plot_curves.py"), str(run), "--out", str(tmp_path / "fig7.png"), cwd=tmp_path)
     assert (tmp_path / "fig7.png").stat().st_size > 0
+    # the policy exported without its replay buffer: small, and the same greedy episodes as the run itself
+    EXPORT = str(ROOT / "recipes" / "export_policy.py")
+    shipped = tmp_path / "shipped"
+    out4 = _run(EXPORT, f"run={run}", f"out_dir={shipped}", cwd=tmp_path)
+    size = sum(p.stat().st_size for p in shipped.rglob("*") if p.is_file())
+    assert "exported:" in out4.stdout and size < 2_000_000 < sum(p.stat().st_size for p in run.rglob("*") if p.is_file())
+    assert json.loads((shipped / "provenance.json").read_text())["frames"] == 32
+    ev4 = tmp_path / "eval4"
+    _run(str(ROOT / "recipes" / "evaluate_policy.py"), f"run={shipped}", "episodes_per_level=2", "difficulties=[easy]",
+         "policies=[greedy]", "video_episodes=0", f"out_dir={ev4}", cwd=tmp_path)
+    assert json.loads((ev4 / "results.json").read_text())["easy"]["greedy"] == res["easy"]["greedy"]
+    again = _run(EXPORT, f"run={run}", f"out_dir={shipped}", cwd=tmp_path, ok=False)
+    assert again.returncode != 0 and "overwrite=true" in again.stderr
 
 
 def test_bad_configs_fail_clearly(small_dataset_dir, tmp_path):

@@ -1,0 +1,52 @@
+"""A trained push policy as a small run folder that ships: ``config.yaml``, one checkpoint holding only
+the Q-network (and the SHA-256 of its files), the training logs (``csv/``) and ``provenance.json``.
+
+A ``train_dqn.py`` checkpoint carries the replay buffer (1.5 GB at the default config) beside ~1 MB of
+weights; what a user needs to evaluate or roll out the policy is the weights and the config that builds
+the network. The exported folder is a run folder like any other (``load_greedy``, ``evaluate_policy.py
+run=...``, the answering systems' ``run``), written to a hidden folder and renamed into place.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from pathlib import Path
+
+from torchrl.checkpoint import Checkpoint, CheckpointRotation
+
+from mqa_rl.training.checkpoint import INTEGRITY, IntegrityAdapter
+
+
+def export_policy(actor, run: str | Path, out_dir: str | Path, *, step: int, provenance: dict,
+                  overwrite: bool = False) -> Path:
+    """Write ``actor``'s weights with ``run``'s config.yaml to ``out_dir`` (atomically); returns it."""
+    run, out_dir = Path(run), Path(out_dir)
+    if out_dir.exists() and not overwrite:
+        raise FileExistsError(f"{out_dir} exists: choose another out_dir, or overwrite=true to replace it")
+    staging = out_dir.with_name(f".{out_dir.name}.tmp{os.getpid()}")
+    shutil.rmtree(staging, ignore_errors=True)
+    try:
+        staging.mkdir(parents=True)
+        shutil.copy2(run / "config.yaml", staging / "config.yaml")
+        if (run / "csv").is_dir():              # the training curves (Fig. 7 reads them), ~0.2 MB
+            shutil.copytree(run / "csv", staging / "csv")
+        checkpoint = Checkpoint(policy=actor)
+        checkpoint.register(INTEGRITY, {}, adapter=IntegrityAdapter())
+        CheckpointRotation(staging / "checkpoints", keep_last=1).save(checkpoint, step=int(step))
+        (staging / "provenance.json").write_text(json.dumps(provenance, indent=1) + "\n")
+        if out_dir.exists():
+            old = out_dir.with_name(f".{out_dir.name}.old{os.getpid()}")
+            os.replace(out_dir, old)
+            os.replace(staging, out_dir)
+            shutil.rmtree(old)
+        else:
+            os.replace(staging, out_dir)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    return out_dir
+
+
+def folder_bytes(folder: Path) -> int:
+    return sum(p.stat().st_size for p in Path(folder).rglob("*") if p.is_file())

@@ -1,0 +1,82 @@
+"""Export a trained push policy as a small run folder (config.yaml + the Q-network's weights, ~1 MB),
+without the replay buffer its training checkpoints carry (1.5 GB at the default config).
+
+    python recipes/export_policy.py run=runs/global out_dir=checkpoints/dqn_global \
+        trained_with="python recipes/train_dqn.py reward=global out_dir=runs/global"
+
+The folder loads wherever a run folder does: ``python recipes/evaluate_policy.py run=checkpoints/dqn_global``,
+or as an answering system (``systems.dqn_global.run=checkpoints/dqn_global``). It is checked after
+writing: the exported network gives the source's Q values, bit for bit, on a test observation.
+"""
+
+from __future__ import annotations
+
+import datetime
+import json
+import subprocess
+from pathlib import Path
+
+import hydra
+import torch
+from omegaconf import DictConfig, OmegaConf
+from torchrl.checkpoint import Checkpoint
+
+from mqa_rl import keys
+from mqa_rl.data.dataset import dataset_fingerprint
+from mqa_rl.envs.factory import make_mqa_env
+from mqa_rl.modules.trained_policy import load_greedy
+from mqa_rl.training.policy_export import export_policy, folder_bytes
+
+
+def _git_commit() -> str | None:
+    try:
+        out = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True, timeout=10,
+                             cwd=Path(__file__).parent)
+        return out.stdout.strip() or None
+    except OSError:
+        return None
+
+
+def export(cfg: DictConfig) -> dict:
+    if not cfg.run or not cfg.out_dir:
+        raise ValueError("give run=<a train_dqn.py output folder> and out_dir=<where the export goes>")
+    run = Path(cfg.run)
+    if not (run / "config.yaml").exists():
+        raise FileNotFoundError(f"{run / 'config.yaml'} not found: run= must be a recipes/train_dqn.py output folder")
+    if Path(cfg.out_dir).exists() and not cfg.overwrite:
+        raise FileExistsError(f"{cfg.out_dir} exists: choose another out_dir, or overwrite=true to replace it")
+    run_cfg = OmegaConf.load(run / "config.yaml")
+    dataset = str(cfg.dataset or run_cfg.dataset)
+    env = make_mqa_env(dataset, split="test", seed=0, image_size=int(run_cfg.env.image_size))
+    try:
+        actor, _, source = load_greedy(run, cfg.checkpoint, env)
+        trained: dict = {}
+        Checkpoint(trainer_state=trained).load(source, components=["trainer_state"])
+        step = int(trained["frames"])
+        provenance = {"source_run": str(run), "source_checkpoint": f"checkpoints/{source.name}",
+                      **{k: trained[k] for k in ("frames", "updates", "episodes", "train_seconds") if k in trained},
+                      "reward": run_cfg.reward.name, "trunk": run_cfg.model.trunk,
+                      "dataset": dataset, "dataset_sha256": dataset_fingerprint(dataset),
+                      "trained_with": cfg.trained_with, "git_commit": _git_commit(),
+                      "exported": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
+        out = export_policy(actor, run, cfg.out_dir, step=step, provenance=provenance, overwrite=cfg.overwrite)
+        exported, _, _ = load_greedy(out, None, env)
+        td = env.reset()
+        with torch.no_grad():
+            same = torch.equal(actor(td.clone())[keys.ACTION_VALUE], exported(td.clone())[keys.ACTION_VALUE])
+    finally:
+        env.close()
+    if not same:
+        raise RuntimeError(f"the export in {out} does not reproduce {source}'s Q values: delete it and report a bug")
+    summary = {"out_dir": str(out), "bytes": folder_bytes(out), "source": str(source), "frames": step}
+    print("exported:", json.dumps(summary))
+    return summary
+
+
+@hydra.main(config_path="conf", config_name="export_policy", version_base="1.3")
+def main(cfg: DictConfig) -> None:
+    export(cfg)
+
+
+if __name__ == "__main__":
+    main()
