@@ -3,10 +3,14 @@
 #   1. make the default dataset unless a valid one is there, and print its summary;
 #   2. run two random-policy episodes on it and write their videos next to a printed log;
 #   3. the whole MQA pipeline at a quick CPU scale (tools/answering_pipeline.sh): DQN(R_l) briefly,
-#      rollouts of four systems, VQA encoder pretraining, one VQA per system, Table III, videos.
+#      rollouts of four systems, VQA encoder pretraining, one VQA per system, Table III, videos;
+#   4. the shipped DQN(R_l) (checkpoints/dqn_local, trained at the default CPU config): greedy vs random
+#      on 5 test questions per level, with a video per level (runs/main/shipped_dqn_local).
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 . tools/bootstrap.sh
 python recipes/make_dataset.py
 python recipes/random_episodes.py
 bash tools/answering_pipeline.sh
+python recipes/evaluate_policy.py run=checkpoints/dqn_local episodes_per_level=5 'policies=[greedy,random]' \
+  video_episodes=1 out_dir=runs/main/shipped_dqn_local

@@ -1,8 +1,11 @@
 #!/usr/bin/env bash
 # The paper's Table III at full scale on the default dataset (answering=default: every COUNTING question,
 # 3 random rollouts per training question), with the paper's VQA (vqa=eqa):
-#   1. the three DQN variants at the default CPU config, unless runs/<variant> already holds a checkpoint
-#   2. rollouts of random; the VQA encoder pretrained on their frames
+#   1. the three DQN variants: runs/<variant> if it holds a checkpoint, else the shipped policy
+#      (checkpoints/dqn_<variant>, trained at the default CPU config), else trained here (~13 min each);
+#      MQA_TRAIN=1 trains whatever runs/ lacks instead of using what ships
+#   2. rollouts of random; the VQA encoder pretrained on their frames (~28 min), or the shipped one
+#      (checkpoints/vqa_encoder, pretrained on the same frames) unless MQA_TRAIN=1
 #   3. per system (random, no manipulation, privileged, DQN(R_g), DQN(R_l), DQN(R_g+R_l)): rollouts, its VQA
 #   4. Table III, per type, policies, Fig. 7                       -> runs/answering/report/counting-eqa
 # Each system is complete before the next starts, and every step resumes or skips what is done, so an
@@ -16,20 +19,33 @@ start=$SECONDS
 step() { echo; echo "=== [$(( (SECONDS - start) / 60 )) min] $*"; }
 
 for v in global local global_local; do
-  if ! compgen -G "runs/$v/checkpoints/checkpoint-*" > /dev/null; then
+  if compgen -G "runs/$v/checkpoints/checkpoint-*" > /dev/null; then
+    continue
+  elif [ -z "${MQA_TRAIN:-}" ] && [ -f "checkpoints/dqn_$v/config.yaml" ]; then
+    step "DQN($v): the shipped policy checkpoints/dqn_$v"
+    EXTRA+=("systems.dqn_$v.run=checkpoints/dqn_$v")
+  else
     step "DQN($v), default CPU config"
     python recipes/train_dqn.py "reward=$v" "out_dir=runs/$v" resume=true
   fi
 done
 step "rollouts of random (the VQA encoder learns from their frames)"
 python recipes/collect_rollouts.py "${EXTRA[@]}" system=random
-step "VQA encoder pretraining"
-python recipes/pretrain_vqa_encoder.py "${EXTRA[@]}" resume=true
+VQA=()
+ROOT=runs/answering
+for a in "${EXTRA[@]}"; do case $a in root=*) ROOT=${a#root=} ;; esac; done
+if [ -z "${MQA_TRAIN:-}" ] && [ -f checkpoints/vqa_encoder/encoder.pt ] && [ ! -d "$ROOT/encoder" ]; then
+  step "VQA encoder: the shipped one, checkpoints/vqa_encoder/encoder.pt"
+  VQA=(encoder.weights=checkpoints/vqa_encoder/encoder.pt)
+else
+  step "VQA encoder pretraining"
+  python recipes/pretrain_vqa_encoder.py "${EXTRA[@]}" resume=true
+fi
 for s in random no_manipulation privileged dqn_global dqn_local dqn_global_local; do
   step "rollouts of $s"
   python recipes/collect_rollouts.py "${EXTRA[@]}" "system=$s"     # random's: already complete, skipped
   step "VQA of $s"
-  python recipes/train_vqa.py "${EXTRA[@]}" "system=$s" resume=true
+  python recipes/train_vqa.py "${EXTRA[@]}" "system=$s" resume=true "${VQA[@]}"
 done
 step "Table III"
 python recipes/evaluate.py "${EXTRA[@]}"
