@@ -113,6 +113,23 @@ def test_oracle_demonstrations_are_collected_and_refused_when_they_do_not_fit(sm
         collect_demonstrations(env, 2, progress=False, learner_share=0.5)
 
 
+def test_oracle_counts_only_the_tries_the_env_executed(small_dataset):
+    # DAgger: a push the oracle labelled but the learner overrode is not a try at that occluder
+    from mqa_rl.envs.sapien_bin import SapienBinEnv
+    from mqa_rl.modules.privileged_policy import PrivilegedPushPolicy
+
+    env = SapienBinEnv(small_dataset, split="train", difficulties=["hard"], seed=0)
+    oracle = PrivilegedPushPolicy(env, lookahead=1)
+    env.reset()
+    first = oracle.choose()
+    assert first != actions.STOP and sum(oracle._tries.values()) == 1
+    oracle.executed(actions.STOP if first != actions.STOP else 0)       # the learner did something else
+    assert sum(oracle._tries.values()) == 0
+    assert oracle.choose() == first                                      # so the oracle still owes that push
+    oracle.executed(first)                                               # the env ran it: counted
+    assert sum(oracle._tries.values()) == 1
+
+
 def test_push_cross_entropy_learns_demonstrated_pushes_and_leaves_stops_to_td():
     torch.manual_seed(0)
     net = PushQNet(VOCAB, camera_distance=0.9, **SMALL)

@@ -57,6 +57,7 @@ def collect_demonstrations(env, states: int, *, progress: bool = True, learner=N
             if learner is not None and float(torch.rand((), generator=rng)) < learner_share:
                 with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
                     td = learner(td)
+                oracle.executed(int(td[keys.ACTION]))
             td = env.step(td)
             if td["next", "done"].item():
                 break

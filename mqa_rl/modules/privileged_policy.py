@@ -65,6 +65,7 @@ class PrivilegedPushPolicy:
         self.geometry, self.border_px = geometry, int(border_px)
         self.image_visible = image_visible or geometry == "visible"     # a target the image lacks has no border
         self._tries: dict[tuple[int, int], int] = {}
+        self._last: tuple[int, tuple[int, int]] | None = None     # the last push chosen and its (target, occluder)
         self._episode = None
 
     def revealed(self, visible: np.ndarray, full: np.ndarray) -> np.ndarray:
@@ -79,6 +80,7 @@ class PrivilegedPushPolicy:
         if key != self._episode or int(gt["push_count"]) == 0:
             self._episode, self._tries = key, {}
         candidates = self.candidates(gt)
+        self._last = None
         if not candidates:
             return actions.STOP
         if self.lookahead <= 1 or len(candidates) == 1:
@@ -90,7 +92,16 @@ class PrivilegedPushPolicy:
         if self.refine_radius:
             action = self.refine(action, gt["target"])
         self._tries[pair] = self._tries.get(pair, 0) + 1
+        self._last = (action, pair)
         return action
+
+    def executed(self, action: int) -> None:
+        """The env ran ``action`` after ``choose()``: when another policy's (DAgger's learner), the
+        oracle's push was a label only and its try at that occluder is not counted."""
+        if self._last is not None and int(action) != self._last[0]:
+            pair = self._last[1]
+            self._tries[pair] -= 1
+        self._last = None
 
     def refine(self, action: int, target: np.ndarray) -> int:
         """Of ``action`` and its direction started from the cells within ``refine_radius``, the push
