@@ -125,7 +125,7 @@ def test_oracle_counts_only_the_tries_the_env_executed(small_dataset):
     assert first != actions.STOP and sum(oracle._tries.values()) == 1
     oracle.executed(actions.STOP if first != actions.STOP else 0)       # the learner did something else
     assert sum(oracle._tries.values()) == 0
-    assert oracle.choose() == first                                      # so the oracle still owes that push
+    assert oracle.choose() == first                                      # same state, same label
     oracle.executed(first)                                               # the env ran it: counted
     assert sum(oracle._tries.values()) == 1
 

@@ -146,7 +146,7 @@ class SapienBinEnv(EnvBase):
             info=info,
         )
         self.action_spec = Categorical(actions.NUM_ACTIONS, shape=(), dtype=i64)
-        # An input of reset only (never returned): declared as state so that a TransformedEnv passes it on.
+        # Read by reset (reset returns -1): declared as state so that a TransformedEnv passes it on.
         self.state_spec = Composite({keys.RESET_QUESTION: Bounded(-1, len(self.dataset.questions) - 1,
                                                                   shape=(1,), dtype=i64)})
         self.reward_spec = Unbounded(shape=(1,), dtype=f32)
