@@ -77,9 +77,14 @@ def check_config(cfg: DictConfig) -> None:
 DEMO_METRICS = ("loss_demo", "demo_agreement", "demo_near", "demo_stop_agreement")
 
 
-def pretrain_on_demonstrations(state, updates, demo_batch, demo_loss, aux_loss, optim, params, target_updater, cfg, logger):
+def pretrain_on_demonstrations(state, updates, demo_batch, demo_loss, aux_loss, optim, params, target_updater, cfg, logger,
+                               save):
     """DQfD's pre-training phase: margin (and target-map) updates on the demonstrations alone, then the
-    target network takes the pretrained weights. Counted in ``state`` (a resumed run does not repeat it)."""
+    target network takes the pretrained weights. Counted in ``state`` and checkpointed (``save``) every
+    ``demos.checkpoint_updates`` and at the end: a killed or lengthened (``resume=true
+    demos.pretrain_updates=<more>``) run continues from the last saved update, repeating none."""
+    every = int(cfg.demos.get("checkpoint_updates") or 0)
+    started = time.perf_counter()
     window = []
     lr = cfg.demos.get("pretrain_lr") or cfg.optim.lr       # a faster rate gets the pushes' softmax off its plateau
     for group in optim.param_groups:
@@ -93,6 +98,8 @@ def pretrain_on_demonstrations(state, updates, demo_batch, demo_loss, aux_loss, 
         torch.nn.utils.clip_grad_norm_(params, cfg.optim.max_grad_norm)
         optim.step()
         state["demo_pretrain_updates"] += 1
+        state["demo_pretrain_seconds"] = state.get("demo_pretrain_seconds", 0.0) + time.perf_counter() - started
+        started = time.perf_counter()
         window.append([td[k].item() for k in DEMO_METRICS])
         if state["demo_pretrain_updates"] % 50 == 0 or state["demo_pretrain_updates"] == updates:
             means = dict(zip(DEMO_METRICS, np.mean(window, 0)))
@@ -100,11 +107,14 @@ def pretrain_on_demonstrations(state, updates, demo_batch, demo_loss, aux_loss, 
             print(f"demonstration pre-training {state['demo_pretrain_updates']}/{updates}: "
                   + ", ".join(f"{k} {v:.3f}" for k, v in means.items()), flush=True)
             window = []
+        if every and state["demo_pretrain_updates"] % every == 0 and state["demo_pretrain_updates"] < updates:
+            save()
     for group in optim.param_groups:
         group["lr"] = cfg.optim.lr
     with warnings.catch_warnings():             # the target network starts from the pretrained weights
         warnings.simplefilter("ignore")
         target_updater.init_()
+    save()
 
 
 def learner_device(name: str) -> torch.device:
@@ -203,8 +213,10 @@ def train(cfg: DictConfig) -> dict:
             raise FileExistsError(f"{out} already holds checkpoints ({ckpt.latest().name}): pass resume=true to "
                                   f"continue that run, or choose another out_dir")
         path = ckpt.load()
-        dropped = trim_scalars(out / "csv", state["frames"])
-        print(f"resumed from {path} at {state['frames']} frames, {state['updates']} updates "
+        dropped = (trim_scalars(out / "csv", state["frames"], exclude="demo_pretrain")         # stepped by frames
+                   + trim_scalars(out / "csv" / "scalars" / "demo_pretrain", state["demo_pretrain_updates"]))  # by updates
+        print(f"resumed from {path} at {state['frames']} frames, {state['updates']} updates, "
+              f"{state['demo_pretrain_updates']} demonstration pre-training updates "
               f"({dropped} log rows after it dropped)")
     elif cfg.resume:
         print(f"resume=true but no checkpoint in {ckpt.directory}: starting a new run")
@@ -218,7 +230,7 @@ def train(cfg: DictConfig) -> dict:
 
     if demos is not None and state["demo_pretrain_updates"] < int(demo_cfg["pretrain_updates"]):
         pretrain_on_demonstrations(state, int(demo_cfg["pretrain_updates"]), demo_batch, demo_loss, aux_loss, optim, params,
-                                   target_updater, cfg, logger)
+                                   target_updater, cfg, logger, save=ckpt.save)
     total = int(col.total_frames)
     remaining = total - state["frames"]
     if remaining > 0:
@@ -309,7 +321,9 @@ def train(cfg: DictConfig) -> dict:
     logger.close()
     eval_env.close()
     summary = {"frames": state["frames"], "updates": state["updates"], "episodes": state["episodes"],
-               "train_seconds": round(state["train_seconds"], 1), "checkpoint": str(ckpt.latest())}
+               "train_seconds": round(state["train_seconds"], 1),
+               "demo_pretrain_updates": state["demo_pretrain_updates"],
+               "demo_pretrain_seconds": round(state.get("demo_pretrain_seconds", 0.0), 1), "checkpoint": str(ckpt.latest())}
     print("done:", summary)
     return summary
 

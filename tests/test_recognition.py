@@ -157,15 +157,28 @@ def test_pretrain_then_train_dqn_from_the_recognition_file(small_dataset_dir, tm
                          capture_output=True, text=True, timeout=600, env=ENV, cwd=tmp_path)
     assert out.returncode == 0 and "6 demonstrations" in out.stdout, out.stderr[-3000:]
     run = tmp_path / "run"
-    out = subprocess.run([sys.executable, str(ROOT / "recipes" / "train_dqn.py"), "profile=smoke", f"dataset={small_dataset_dir}",
-                          f"out_dir={run}", "threads=1", "model.class_map=true", f"model.pretrained={rec / 'recognition.pt'}",
-                          "loss.target_map_weight=1.0", f"demos.path=[{demos},{demos}]", "demos.pretrain_updates=3",
-                          "demos.batch_size=4", "demos.loss=push_cross_entropy", "demos.smooth_cells=1.0",
-                          "demos.stop_margin=0.5", "demos.pretrain_lr=3e-3",
-                          "buffer.augment=dihedral"], capture_output=True, text=True, timeout=600, env=ENV, cwd=tmp_path)
+    train = [str(ROOT / "recipes" / "train_dqn.py"), "profile=smoke", f"dataset={small_dataset_dir}",
+             f"out_dir={run}", "threads=1", "model.class_map=true", f"model.pretrained={rec / 'recognition.pt'}",
+             "loss.target_map_weight=1.0", f"demos.path=[{demos},{demos}]", "demos.batch_size=4",
+             "demos.loss=push_cross_entropy", "demos.smooth_cells=1.0", "demos.stop_margin=0.5", "demos.pretrain_lr=3e-3",
+             "buffer.augment=dihedral"]
+    out = subprocess.run([sys.executable, *train, "demos.pretrain_updates=3"], capture_output=True, text=True, timeout=600,
+                         env=ENV, cwd=tmp_path)
     assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-3000:]
     assert "done: {'frames': 32" in out.stdout and "demonstration pre-training 3/3" in out.stdout
     assert (run / "csv" / "scalars" / "train" / "demo_stop_agreement.csv").exists()
+    # a lengthened pre-training continues from the finished run's checkpoint: the 3 updates done are not
+    # repeated, their log rows are kept (they are stepped by update, not frame), and a third call has nothing to do
+    longer = [*train, "demos.pretrain_updates=5", "demos.checkpoint_updates=1", "resume=true"]
+    out = subprocess.run([sys.executable, *longer], capture_output=True, text=True, timeout=600, env=ENV, cwd=tmp_path)
+    assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-3000:]
+    assert "3 demonstration pre-training updates" in out.stdout and "'demo_pretrain_updates': 5" in out.stdout
+    assert "pre-training 4/5" not in out.stdout and "demonstration pre-training 5/5" in out.stdout
+    logged = (run / "csv" / "scalars" / "demo_pretrain" / "loss_demo.csv").read_text().split()
+    assert [row.split(",")[0] for row in logged] == ["3", "5"]
+    out = subprocess.run([sys.executable, *longer], capture_output=True, text=True, timeout=600, env=ENV, cwd=tmp_path)
+    assert out.returncode == 0 and "5 demonstration pre-training updates" in out.stdout
+    assert "demonstration pre-training 5/5" not in out.stdout
     # DAgger: the trained policy acts, the oracle labels
     dagger = tmp_path / "dagger"
     out = subprocess.run([sys.executable, str(ROOT / "recipes" / "collect_demonstrations.py"), f"dataset={small_dataset_dir}",

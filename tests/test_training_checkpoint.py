@@ -81,6 +81,26 @@ def test_save_then_load_restores_the_exact_state(tmp_path):
     assert b["updater"].counter == a["updater"].counter
 
 
+def test_a_checkpoint_before_the_first_frame_holds_no_buffer_and_restores(tmp_path):
+    """Demonstration pre-training saves before any frame: the empty replay buffer is left out (TorchRL
+    cannot save an uninitialised storage), the rest restores; a buffer-less checkpoint after frames is refused."""
+    a = build(tmp_path, "a", seed=0)
+    a["opt"].step()                                            # something to restore beyond the weights
+    a["state"].update(demo_pretrain_updates=7)
+    path = a["ckpt"].save()
+    assert not list((path / "components").glob("*replay_buffer*"))
+    b = build(tmp_path, "b", seed=1)
+    assert b["ckpt"].load() == path and b["state"]["demo_pretrain_updates"] == 7 and len(b["rb"]) == 0
+    for pa, pb in zip(a["actor"].parameters(), b["actor"].parameters()):
+        assert torch.equal(pa, pb)
+    b["rb"].extend(compact_transitions(transitions(4, seed=3)))   # the restored run fills its buffer as usual
+    assert len(b["rb"]) == 4
+    a["state"].update(frames=8)                               # a forged counter: frames but no buffer
+    a["ckpt"].save()
+    with pytest.raises(CheckpointCorrupt, match="no replay buffer after 8 frames"):
+        build(tmp_path, "c", seed=2)["ckpt"].load()
+
+
 def test_rng_state_round_trips(tmp_path):
     a = build(tmp_path, "a", seed=0)
     train_a_little(a)

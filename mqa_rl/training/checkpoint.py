@@ -25,6 +25,7 @@ import torch
 from torchrl.checkpoint import Checkpoint, CheckpointAdapter, CheckpointError, CheckpointRotation, GlobalRNGState
 
 INTEGRITY = "zz_integrity"        # sorts last: saved after every other component of the checkpoint
+REPLAY = "replay_buffer"          # left out of a checkpoint saved before the first frame (still empty)
 
 
 class CheckpointCorrupt(RuntimeError):
@@ -83,7 +84,7 @@ class TrainingCheckpoint:
         self.state = state
         self.target_updater = target_updater
         self.beta_counter = beta_counter
-        self.checkpoint = Checkpoint(policy=actor, loss=loss, optimizer=optimizer, replay_buffer=replay_buffer,
+        self.checkpoint = Checkpoint(policy=actor, loss=loss, optimizer=optimizer, **{REPLAY: replay_buffer},
                                      exploration=egreedy, trainer_state=state, rng=GlobalRNGState())
         self.checkpoint.register(INTEGRITY, {}, adapter=IntegrityAdapter())
         self.replay_buffer = replay_buffer
@@ -92,7 +93,10 @@ class TrainingCheckpoint:
         """Write a checkpoint at the current frame count (atomically); returns its path."""
         self.state["target_updater_counter"] = int(getattr(self.target_updater, "counter", 0))
         self.state["beta_steps"] = int(self.beta_counter)
-        return self.rotation.save(self.checkpoint, step=int(self.state["frames"]))
+        components = None
+        if not len(self.replay_buffer):     # before the first frame (demonstration pre-training): nothing to save
+            components = [name for name in self.checkpoint._components if name != REPLAY]
+        return self.rotation.save(self.checkpoint, step=int(self.state["frames"]), components=components)
 
     def latest(self) -> Path | None:
         return newest_checkpoint(self.rotation)
@@ -107,8 +111,14 @@ class TrainingCheckpoint:
             raise RuntimeError("load a checkpoint into a fresh run only (this replay buffer already holds data)")
         hint = (f"delete {path} to resume from an older checkpoint in {self.directory}, "
                 f"or start afresh with resume=false (or another out_dir)")
-        restore_verified(self.checkpoint, path, hint)
+        try:
+            saved = set(Checkpoint.manifest(path)["components"])
+        except (CheckpointError, OSError, KeyError, TypeError) as error:
+            raise CheckpointCorrupt(f"checkpoint {path} has no readable manifest ({error}); {hint}") from error
+        restore_verified(self.checkpoint, path, hint, components=sorted(saved & set(self.checkpoint._components)))
         missing = {"frames", "updates"} - set(self.state)
+        if REPLAY not in saved and self.state["frames"]:
+            raise CheckpointCorrupt(f"checkpoint {path} has no replay buffer after {self.state['frames']} frames; {hint}")
         if missing:
             raise CheckpointCorrupt(f"checkpoint {path} lacks the run counters {sorted(missing)}; {hint}")
         if hasattr(self.target_updater, "counter"):
@@ -140,12 +150,12 @@ def newest_checkpoint(rotation: CheckpointRotation) -> Path | None:
     return latest
 
 
-def restore_verified(checkpoint, path: Path, hint: str) -> None:
-    """``checkpoint.load(path)`` after checking every file's SHA-256; any failure → ``CheckpointCorrupt``
-    saying ``hint`` (what to do)."""
+def restore_verified(checkpoint, path: Path, hint: str, components: list[str] | None = None) -> None:
+    """``checkpoint.load(path)`` (its ``components``, default all) after checking every file's SHA-256; any
+    failure → ``CheckpointCorrupt`` saying ``hint`` (what to do)."""
     try:
         IntegrityAdapter.verify(path)
-        checkpoint.load(path, strict="error")
+        checkpoint.load(path, components=components, strict="error")
     except (CheckpointError, OSError, ValueError, KeyError, RuntimeError, EOFError) as error:
         raise CheckpointCorrupt(f"checkpoint {path} cannot be restored ({type(error).__name__}: "
                                 f"{str(error)[:500]}); {hint}") from error

@@ -18,10 +18,13 @@ import numpy as np
 from torchrl.record.loggers import CSVLogger
 
 
-def trim_scalars(csv_dir: str | Path, max_step: int) -> int:
-    """Drop rows with step > ``max_step`` from every scalar CSV (atomically); returns rows dropped."""
+def trim_scalars(csv_dir: str | Path, max_step: int, exclude: str | None = None) -> int:
+    """Drop rows with step > ``max_step`` from every scalar CSV (atomically), except under folders
+    named ``exclude`` (series counted in other steps); returns rows dropped."""
     dropped = 0
     for path in Path(csv_dir).rglob("*.csv"):
+        if exclude is not None and exclude in path.relative_to(csv_dir).parts[:-1]:
+            continue
         lines = path.read_text().splitlines()
         keep = [ln for ln in lines if ln and float(ln.split(",", 1)[0]) <= max_step]
         if len(keep) != len(lines):
