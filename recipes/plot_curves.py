@@ -7,6 +7,10 @@ per run (variant), saved as PNG.
 Training reward: the mean over the episodes that ended in each logged batch (``train/reward``),
 smoothed with a moving average over ``--window`` points; testing: the greedy evaluations
 (``eval/reward``). The x axis is collected frames (env steps).
+
+Runs trained from demonstrations also get ``<out>_pretraining.png``: the pre-training's demonstration
+loss and how often the greedy push lands near the demonstrated one (``demo_near``) and the stop-or-push
+decision agrees (``demo_stop_agreement``), per update. A run of pre-training alone gets only that figure.
 """
 
 from __future__ import annotations
@@ -52,12 +56,35 @@ def label(run: Path) -> str:
     return run.name
 
 
+def plot_pretraining(runs: list[Path], out: Path) -> Path:
+    """One panel per run: demonstration loss (left axis) and agreement with the demonstrator (right)."""
+    fig, axes = plt.subplots(1, len(runs), figsize=(5 * len(runs), 3.6), squeeze=False)
+    for ax, run in zip(axes[0], runs):
+        steps, loss = read_scalar(run, "demo_pretrain/loss_demo")
+        ax.plot(steps, loss, color="tab:blue", label="demonstration loss")
+        ax.set_xlabel("pre-training updates")
+        ax.set_ylabel("loss")
+        right = ax.twinx()
+        for name, color in (("demo_near", "tab:orange"), ("demo_stop_agreement", "tab:green")):
+            s, v = read_scalar(run, f"demo_pretrain/{name}")
+            right.plot(s, v, color=color, label=name.replace("_", " "))
+        right.set_ylim(0, 1)
+        right.set_ylabel("fraction of demonstrations")
+        ax.set_title(textwrap.fill(label(run), 48), fontsize=9)
+        ax.grid(alpha=0.3)
+        lines = ax.get_legend_handles_labels()[0] + right.get_legend_handles_labels()[0]
+        ax.legend(lines, [line.get_label() for line in lines], fontsize=8, loc="center right")
+    fig.tight_layout()
+    return save_figure(fig, out)
+
+
 def plot(runs: list[Path], out: Path, window: int = 10) -> Path:
     fig, axes = plt.subplots(1, len(runs), figsize=(5 * len(runs), 3.6), squeeze=False)
     for ax, run in zip(axes[0], runs):
         steps, reward = read_scalar(run, "train/reward")
         if len(steps) == 0:
-            raise FileNotFoundError(f"{run} has no csv/scalars/train/reward.csv: is it a train_dqn.py output folder?")
+            raise FileNotFoundError(f"{run} has no csv/scalars/train/reward.csv (no training episode ended): is it a "
+                                    f"train_dqn.py output folder?")
         ax.plot(steps, reward, color="tab:blue", alpha=0.25, lw=0.8)
         ax.plot(steps, smooth(reward, window), color="tab:blue", label="training")
         es, ev = read_scalar(run, "eval/reward")
@@ -78,7 +105,12 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path("fig7_rewards.png"))
     ap.add_argument("--window", type=int, default=10, help="moving-average window of the training curve")
     args = ap.parse_args()
-    print(plot(args.runs, args.out, args.window))
+    pretrained = [run for run in args.runs if len(read_scalar(run, "demo_pretrain/loss_demo")[0])]
+    if pretrained:
+        print(plot_pretraining(pretrained, args.out.with_name(f"{args.out.stem}_pretraining{args.out.suffix}")))
+    rl = [run for run in args.runs if run not in pretrained or len(read_scalar(run, "train/reward")[0])]
+    if rl or not pretrained:
+        print(plot(rl or args.runs, args.out, args.window))
 
 
 if __name__ == "__main__":

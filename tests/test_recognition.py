@@ -179,6 +179,10 @@ def test_pretrain_then_train_dqn_from_the_recognition_file(small_dataset_dir, tm
     out = subprocess.run([sys.executable, *longer], capture_output=True, text=True, timeout=600, env=ENV, cwd=tmp_path)
     assert out.returncode == 0 and "5 demonstration pre-training updates" in out.stdout
     assert "demonstration pre-training 5/5" not in out.stdout
+    out = subprocess.run([sys.executable, str(ROOT / "recipes" / "plot_curves.py"), str(run), "--out", str(tmp_path / "f.png")],
+                         capture_output=True, text=True, timeout=300, env=ENV, cwd=tmp_path)
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert (tmp_path / "f_pretraining.png").stat().st_size > 0 and (tmp_path / "f.png").stat().st_size > 0
     # DAgger: the trained policy acts, the oracle labels
     dagger = tmp_path / "dagger"
     out = subprocess.run([sys.executable, str(ROOT / "recipes" / "collect_demonstrations.py"), f"dataset={small_dataset_dir}",
