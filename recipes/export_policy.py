@@ -54,7 +54,8 @@ def export(cfg: DictConfig) -> dict:
         Checkpoint(trainer_state=trained).load(source, components=["trainer_state"])
         step = int(trained["frames"])
         provenance = {"source_run": str(run), "source_checkpoint": f"checkpoints/{source.name}",
-                      **{k: trained[k] for k in ("frames", "updates", "episodes", "train_seconds") if k in trained},
+                      **{k: trained[k] for k in ("frames", "updates", "episodes", "train_seconds", "demo_pretrain_updates",
+                                                  "demo_pretrain_seconds") if k in trained},
                       "reward": run_cfg.reward.name, "trunk": run_cfg.model.trunk,
                       "dataset": dataset, "dataset_sha256": dataset_fingerprint(dataset),
                       "trained_with": cfg.trained_with, "git_commit": _git_commit(),

@@ -221,10 +221,11 @@ def train(cfg: DictConfig) -> dict:
     elif cfg.resume:
         print(f"resume=true but no checkpoint in {ckpt.directory}: starting a new run")
     config = OmegaConf.to_container(cfg, resolve=True)
-    if not (out / "config.yaml").exists():  # what recipes/evaluate_policy.py rebuilds the network from
-        tmp = out / f".config.yaml.tmp{os.getpid()}"
-        OmegaConf.save(OmegaConf.create(config), tmp)
-        os.replace(tmp, out / "config.yaml")
+    # what recipes/evaluate_policy.py rebuilds the network from; rewritten by every (resumed) invocation, so it
+    # states the settings that made the newest checkpoint (e.g. a lengthened demos.pretrain_updates)
+    tmp = out / f".config.yaml.tmp{os.getpid()}"
+    OmegaConf.save(OmegaConf.create(config), tmp)
+    os.replace(tmp, out / "config.yaml")
     logger = RunLogger(out, wandb=cfg.logger.wandb, project=cfg.logger.project,
                        exp_name=f"dqn_{cfg.reward.name}_{cfg.model.trunk}", config=config)
 

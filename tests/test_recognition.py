@@ -176,6 +176,7 @@ def test_pretrain_then_train_dqn_from_the_recognition_file(small_dataset_dir, tm
     assert "pre-training 4/5" not in out.stdout and "demonstration pre-training 5/5" in out.stdout
     logged = (run / "csv" / "scalars" / "demo_pretrain" / "loss_demo.csv").read_text().split()
     assert [row.split(",")[0] for row in logged] == ["3", "5"]
+    assert "pretrain_updates: 5" in (run / "config.yaml").read_text()      # the config of the newest checkpoint
     out = subprocess.run([sys.executable, *longer], capture_output=True, text=True, timeout=600, env=ENV, cwd=tmp_path)
     assert out.returncode == 0 and "5 demonstration pre-training updates" in out.stdout
     assert "demonstration pre-training 5/5" not in out.stdout
