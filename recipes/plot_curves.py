@@ -73,7 +73,7 @@ def plot_pretraining(runs: list[Path], out: Path) -> Path:
         ax.set_title(textwrap.fill(label(run), 48), fontsize=9)
         ax.grid(alpha=0.3)
         lines = ax.get_legend_handles_labels()[0] + right.get_legend_handles_labels()[0]
-        ax.legend(lines, [line.get_label() for line in lines], fontsize=8, loc="center right")
+        ax.legend(lines, [line.get_label() for line in lines], fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=3)
     fig.tight_layout()
     return save_figure(fig, out)
 
