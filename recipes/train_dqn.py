@@ -63,6 +63,9 @@ def check_config(cfg: DictConfig) -> None:
     if cfg.loss.get("target_map_weight", 0) > 0 and not (cfg.model.get("target_head") or cfg.model.get("class_map")):
         raise ValueError(f"loss.target_map_weight={cfg.loss.target_map_weight} needs model.target_head=true or model.class_map=true "
                          f"(the auxiliary head it trains)")
+    max_states = (cfg.get("demos") or {}).get("max_states")
+    if max_states is not None and int(max_states) < 1:
+        raise ValueError(f"demos.max_states={max_states} must be ≥ 1 (or null: every demonstration)")
     if buf.size < buf.batch_size:
         raise ValueError(f"buffer.size={buf.size} must be ≥ buffer.batch_size={buf.batch_size}")
     if not 0.0 <= col.eps_end <= col.eps_init <= 1.0:
@@ -185,6 +188,10 @@ def train(cfg: DictConfig) -> dict:
     aux_loss = TargetMapLoss(net, aux_weight) if aux_weight > 0 else None
     demo_cfg = cfg.get("demos") or {}
     demos = load_demonstrations(demo_cfg["path"], cfg.dataset) if demo_cfg.get("path") else None
+    if demos is not None and demo_cfg.get("max_states"):      # the first N collected (data-scaling studies)
+        demos = demos[: int(demo_cfg["max_states"])]
+    if demos is not None:
+        print(f"demonstrations: {len(demos)} states from {demo_cfg['path']}")
     demo_loss = (DemonstrationLoss(net, demo_cfg.get("loss", "margin"), demo_cfg["margin"], demo_cfg["weight"],
                                    demo_cfg.get("smooth_cells", 0.0), demo_cfg.get("stop_margin", 0.0),
                                    demo_cfg.get("direction_weight", 0.0))
