@@ -220,6 +220,7 @@ def train(cfg: DictConfig) -> dict:
             raise FileExistsError(f"{out} already holds checkpoints ({ckpt.latest().name}): pass resume=true to "
                                   f"continue that run, or choose another out_dir")
         path = ckpt.load()
+        state.setdefault("demo_pretrain_updates", 0)       # checkpoints older than the pre-training counter
         dropped = (trim_scalars(out / "csv", state["frames"], exclude="demo_pretrain")         # stepped by frames
                    + trim_scalars(out / "csv" / "scalars" / "demo_pretrain", state["demo_pretrain_updates"]))  # by updates
         print(f"resumed from {path} at {state['frames']} frames, {state['updates']} updates, "
