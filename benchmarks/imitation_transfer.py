@@ -65,10 +65,10 @@ def main() -> None:
         folders[path] = demos[allowed]              # the teacher's pushes the mask forbids: no greedy push can match
     print("run | demonstrations | states | pushes | greedy = teacher's | near it | direction at its cell | push-or-stop agrees")
     for run in args.runs:
-        actor, _, checkpoint = load_greedy(run, None, env)
+        actor, _, _ = load_greedy(run, None, env)
         net = next(m for m in actor.modules() if isinstance(m, PushQNet)).eval()
         for path, demos in folders.items():
-            same, near, _, direction = scores(net, demos.clone())
+            same, near, _, direction = scores(net, demos)
             pushes = int((demos[keys.ACTION] != actions.STOP).sum())
             print(f"{run} | {path} | {len(demos)} | {pushes} | {same:.3f} | {near:.3f} | {direction:.3f} | "
                   f"{stop_agreement(net, demos):.3f}", flush=True)

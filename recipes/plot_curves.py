@@ -109,8 +109,8 @@ def main() -> None:
     if pretrained:
         print(plot_pretraining(pretrained, args.out.with_name(f"{args.out.stem}_pretraining{args.out.suffix}")))
     rl = [run for run in args.runs if run not in pretrained or len(read_scalar(run, "train/reward")[0])]
-    if rl or not pretrained:
-        print(plot(rl or args.runs, args.out, args.window))
+    if rl:                  # every run without pre-training is here: plot() names one that is no train_dqn.py run
+        print(plot(rl, args.out, args.window))
 
 
 if __name__ == "__main__":

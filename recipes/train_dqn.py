@@ -101,8 +101,9 @@ def pretrain_on_demonstrations(state, updates, demo_batch, demo_loss, aux_loss, 
         torch.nn.utils.clip_grad_norm_(params, cfg.optim.max_grad_norm)
         optim.step()
         state["demo_pretrain_updates"] += 1
-        state["demo_pretrain_seconds"] = state.get("demo_pretrain_seconds", 0.0) + time.perf_counter() - started
-        started = time.perf_counter()
+        now = time.perf_counter()
+        state["demo_pretrain_seconds"] += now - started
+        started = now
         window.append([td[k].item() for k in DEMO_METRICS])
         if state["demo_pretrain_updates"] % 50 == 0 or state["demo_pretrain_updates"] == updates:
             means = dict(zip(DEMO_METRICS, np.mean(window, 0)))
@@ -210,7 +211,7 @@ def train(cfg: DictConfig) -> dict:
     rb = make_replay_buffer(buf, scratch)
 
     # ---- state and checkpoint
-    state = {"frames": 0, "updates": 0, "episodes": 0, "demo_pretrain_updates": 0, "next_eval": int(cfg.eval.interval_frames),
+    state = {"frames": 0, "updates": 0, "episodes": 0, "demo_pretrain_updates": 0, "demo_pretrain_seconds": 0.0, "next_eval": int(cfg.eval.interval_frames),
              "next_checkpoint": int(cfg.checkpoint.interval_frames), "train_seconds": 0.0}
     ckpt = TrainingCheckpoint(out / "checkpoints", actor=actor, loss=loss, optimizer=optim, replay_buffer=rb,
                               egreedy=egreedy, target_updater=target_updater, beta_counter=counter, state=state,
@@ -220,7 +221,8 @@ def train(cfg: DictConfig) -> dict:
             raise FileExistsError(f"{out} already holds checkpoints ({ckpt.latest().name}): pass resume=true to "
                                   f"continue that run, or choose another out_dir")
         path = ckpt.load()
-        state.setdefault("demo_pretrain_updates", 0)       # checkpoints older than the pre-training counter
+        state.setdefault("demo_pretrain_updates", 0)       # checkpoints older than the pre-training counters
+        state.setdefault("demo_pretrain_seconds", 0.0)
         dropped = (trim_scalars(out / "csv", state["frames"], exclude="demo_pretrain")         # stepped by frames
                    + trim_scalars(out / "csv" / "scalars" / "demo_pretrain", state["demo_pretrain_updates"]))  # by updates
         print(f"resumed from {path} at {state['frames']} frames, {state['updates']} updates, "
@@ -332,7 +334,7 @@ def train(cfg: DictConfig) -> dict:
     summary = {"frames": state["frames"], "updates": state["updates"], "episodes": state["episodes"],
                "train_seconds": round(state["train_seconds"], 1),
                "demo_pretrain_updates": state["demo_pretrain_updates"],
-               "demo_pretrain_seconds": round(state.get("demo_pretrain_seconds", 0.0), 1), "checkpoint": str(ckpt.latest())}
+               "demo_pretrain_seconds": round(state["demo_pretrain_seconds"], 1), "checkpoint": str(ckpt.latest())}
     print("done:", summary)
     return summary
 

@@ -95,7 +95,7 @@ class TrainingCheckpoint:
         self.state["beta_steps"] = int(self.beta_counter)
         components = None
         if not len(self.replay_buffer):     # before the first frame (demonstration pre-training): nothing to save
-            components = [name for name in self.checkpoint._components if name != REPLAY]
+            components = [name for name in self.checkpoint.components if name != REPLAY]
         return self.rotation.save(self.checkpoint, step=int(self.state["frames"]), components=components)
 
     def latest(self) -> Path | None:
@@ -115,7 +115,7 @@ class TrainingCheckpoint:
             saved = set(Checkpoint.manifest(path)["components"])
         except (CheckpointError, OSError, KeyError, TypeError) as error:
             raise CheckpointCorrupt(f"checkpoint {path} has no readable manifest ({error}); {hint}") from error
-        restore_verified(self.checkpoint, path, hint, components=sorted(saved & set(self.checkpoint._components)))
+        restore_verified(self.checkpoint, path, hint, components=sorted(saved & set(self.checkpoint.components)))
         missing = {"frames", "updates"} - set(self.state)
         if REPLAY not in saved and self.state["frames"]:
             raise CheckpointCorrupt(f"checkpoint {path} has no replay buffer after {self.state['frames']} frames; {hint}")
