@@ -64,6 +64,68 @@ def test_class_map_joins_the_state_as_the_questions_attended_class_probabilities
     assert net(rgb, depth, q).shape == (2, actions.NUM_ACTIONS)
 
 
+def _geometric_net():
+    torch.manual_seed(0)
+    return _net(rotated_head=True, geometric_push=True, head_channels=(8, 8), head_context=1).eval()
+
+
+def test_geometric_push_maps_read_the_target_map_and_heights_not_the_visual_features():
+    """Changing the fused rgb+depth features and the question tile (what the stop branch reads) leaves
+    every push map unchanged; changing the heights or the target map changes them."""
+    net = _geometric_net()
+    rgb, depth, q = _obs()
+    with torch.no_grad():
+        before = net.q_map(rgb, depth, q)
+        for p in (*net.fuse.parameters(), *net.depth_trunk.parameters()):
+            p.add_(torch.randn_like(p))
+        after = net.q_map(rgb, depth, q)
+        torch.testing.assert_close(after[:, :8], before[:, :8])
+        assert not torch.allclose(after[:, 8], before[:, 8], atol=1e-4)       # the stop branch does read them
+        raised = depth.clone()
+        raised[..., 64:128, 64:128] -= 0.2                                      # a 20 cm box in the image
+        assert not torch.allclose(net.q_map(rgb, raised, q)[:, :8], before[:, :8], atol=1e-4)
+        net.class_head.bias[1:].add_(torch.randn(CLASSES))                     # another target map
+        assert not torch.allclose(net.q_map(rgb, depth, q)[:, :8], before[:, :8], atol=1e-4)
+
+
+def test_geometry_maps_are_the_target_map_presence_and_per_cell_heights():
+    net = _geometric_net()
+    rgb, _, q = _obs(batch=1)
+    depth = torch.full((1, 1, S, S), 0.9)                                       # the floor: camera 0.9 m away
+    depth[..., 16:24, 40:48] = 0.7                                              # cell (2, 5) fully 20 cm high
+    depth[..., 16:20, 48:56] = 0.8                                              # half of cell (2, 6) 10 cm high
+    with torch.no_grad():
+        fr = net._rgb_features(rgb)
+        t = net._targets(fr, net.question(q))
+        geo = net.geometry(fr, depth, t)
+    assert geo.shape == (1, 5, actions.GRID, actions.GRID)
+    torch.testing.assert_close(geo[:, 0:1], t)
+    torch.testing.assert_close(geo[:, 1], 1 - torch.softmax(net.class_head(fr), 1)[:, 0])
+    mean, high, low = geo[0, 2:]
+    assert (mean[2, 5], high[2, 5], low[2, 5]) == pytest.approx((2.0, 2.0, 2.0), abs=1e-5)   # heights in 0.1 m
+    assert (mean[2, 6], high[2, 6], low[2, 6]) == pytest.approx((0.5, 1.0, 0.0), abs=1e-5)
+    assert float(geo[0, 2:].abs().sum()) == pytest.approx(3 * 2.0 + 0.5 + 1.0, abs=1e-4) and float(mean[2, 4]) == 0
+
+
+def test_geometric_push_stays_equivariant_to_quarter_turns():
+    net = _geometric_net()
+    rgb, depth, q = _obs(batch=1)
+    turn = lambda x: torch.rot90(x, 1, dims=(-2, -1))       # noqa: E731
+    with torch.no_grad():
+        fr, fd, qf, t = net._features(rgb, depth, q)
+        state, geo = net._state(fr, fd, qf, t), net.geometry(fr, depth, t)
+        qmap, turned = net.head(state, geo), net.head(turn(state), turn(geo))
+    for d in range(actions.DIRECTIONS):
+        torch.testing.assert_close(turned[:, (d + 2) % 8], turn(qmap[:, d]), atol=1e-5, rtol=1e-4)
+
+
+def test_geometric_push_needs_the_class_map_and_the_rotated_head():
+    with pytest.raises(ValueError, match="geometric_push needs class_map=true"):
+        PushQNet(VOCAB, camera_distance=0.9, rotated_head=True, geometric_push=True, **SMALL)
+    with pytest.raises(ValueError, match="rotated_head=true"):
+        _net(geometric_push=True)
+
+
 def _coloured_cells(batch, seed):
     """Images whose 8×8 cells each show one of CLASSES flat colours or grey floor, with their labels."""
     g = torch.Generator().manual_seed(seed)
@@ -201,3 +263,26 @@ def test_pretrain_then_train_dqn_from_the_recognition_file(small_dataset_dir, tm
     net = next(m for m in actor.modules() if isinstance(m, PushQNet)) if net is None else net
     for name, value in blob["class_head"].items():
         assert torch.equal(net.class_head.state_dict()[name], value)
+    # the recognition a trained run carries, extracted as a file: the pretraining's visual weights, which
+    # start a new run (here a geometric-push student: its push branch reads the target map and heights)
+    extracted = tmp_path / "extracted.pt"
+    extract = [sys.executable, str(ROOT / "recipes" / "extract_recognition.py"), f"run={run}", f"out={extracted}"]
+    out = subprocess.run(extract, capture_output=True, text=True, timeout=300, env=ENV, cwd=tmp_path)
+    assert out.returncode == 0, out.stderr[-3000:]
+    again = torch.load(extracted, weights_only=True)
+    assert again["meta"]["extracted_from"].endswith(net_checkpoint_name(run))
+    for part in ("rgb_trunk", "class_head"):
+        assert all(torch.equal(again[part][k], v) for k, v in blob[part].items()), part
+    out = subprocess.run(extract, capture_output=True, text=True, timeout=300, env=ENV, cwd=tmp_path)
+    assert out.returncode != 0 and "overwrite=true" in out.stderr              # never replaced silently
+    geometric = [*train[:3], f"out_dir={tmp_path / 'geometric'}", *train[4:6], f"model.pretrained={extracted}",
+                 *train[7:], "model.rotated_head=true", "model.geometric_push=true", "model.head_channels=[8,8]",
+                 "demos.pretrain_updates=2", "collector.total_frames=8"]
+    out = subprocess.run([sys.executable, *geometric], capture_output=True, text=True, timeout=600, env=ENV, cwd=tmp_path)
+    assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-3000:]
+    assert "demonstration pre-training 2/2" in out.stdout and "geometric_push: true" in (tmp_path / "geometric" / "config.yaml").read_text()
+
+
+def net_checkpoint_name(run: Path) -> str:
+    """The newest checkpoint folder's name of a train_dqn.py run."""
+    return sorted(p.name for p in (run / "checkpoints").glob("checkpoint-*"))[-1]
