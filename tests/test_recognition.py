@@ -126,6 +126,29 @@ def test_geometric_push_needs_the_class_map_and_the_rotated_head():
         _net(geometric_push=True)
 
 
+def test_geometric_stop_reads_the_geometry_and_the_question_not_the_visual_features():
+    """With geometric_stop no output depends on the fused rgb+depth features; the stop map follows the
+    heights and the question (the push maps, on the geometric diet, follow the heights only)."""
+    torch.manual_seed(0)
+    net = _net(rotated_head=True, geometric_push=True, geometric_stop=True, head_channels=(8, 8), head_context=1).eval()
+    rgb, depth, q = _obs()
+    with torch.no_grad():
+        before = net.q_map(rgb, depth, q)
+        for p in (*net.fuse.parameters(), *net.depth_trunk.parameters()):
+            p.add_(torch.randn_like(p))
+        torch.testing.assert_close(net.q_map(rgb, depth, q), before)
+        raised = depth.clone()
+        raised[..., 64:128, 64:128] -= 0.2
+        assert not torch.allclose(net.q_map(rgb, raised, q)[:, 8], before[:, 8], atol=1e-4)
+        net.question_classes.weight.zero_()          # t no longer depends on the question feature ...
+        before = net.q_map(rgb, depth, q)
+        other = net.q_map(rgb, depth, torch.flip(q, (-1,)))
+        torch.testing.assert_close(other[:, :8], before[:, :8])                 # ... so the pushes ignore it
+        assert not torch.allclose(other[:, 8], before[:, 8], atol=1e-4)         # and stop reads it directly
+    with pytest.raises(ValueError, match="geometric_stop needs class_map=true"):
+        PushQNet(VOCAB, camera_distance=0.9, rotated_head=True, geometric_stop=True, **SMALL)
+
+
 def _coloured_cells(batch, seed):
     """Images whose 8×8 cells each show one of CLASSES flat colours or grey floor, with their labels."""
     g = torch.Generator().manual_seed(seed)
@@ -264,7 +287,7 @@ def test_pretrain_then_train_dqn_from_the_recognition_file(small_dataset_dir, tm
     for name, value in blob["class_head"].items():
         assert torch.equal(net.class_head.state_dict()[name], value)
     # the recognition a trained run carries, extracted as a file: the pretraining's visual weights, which
-    # start a new run (here a geometric-push student: its push branch reads the target map and heights)
+    # start a new run (here a geometric student: its push and stop branches read the target map and heights)
     extracted = tmp_path / "extracted.pt"
     extract = [sys.executable, str(ROOT / "recipes" / "extract_recognition.py"), f"run={run}", f"out={extracted}"]
     out = subprocess.run(extract, capture_output=True, text=True, timeout=300, env=ENV, cwd=tmp_path)
@@ -276,11 +299,12 @@ def test_pretrain_then_train_dqn_from_the_recognition_file(small_dataset_dir, tm
     out = subprocess.run(extract, capture_output=True, text=True, timeout=300, env=ENV, cwd=tmp_path)
     assert out.returncode != 0 and "overwrite=true" in out.stderr              # never replaced silently
     geometric = [*train[:3], f"out_dir={tmp_path / 'geometric'}", *train[4:6], f"model.pretrained={extracted}",
-                 *train[7:], "model.rotated_head=true", "model.geometric_push=true", "model.head_channels=[8,8]",
+                 *train[7:], "model.rotated_head=true", "model.geometric_push=true", "model.geometric_stop=true", "model.head_channels=[8,8]",
                  "demos.pretrain_updates=2", "collector.total_frames=8"]
     out = subprocess.run([sys.executable, *geometric], capture_output=True, text=True, timeout=600, env=ENV, cwd=tmp_path)
     assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-3000:]
-    assert "demonstration pre-training 2/2" in out.stdout and "geometric_push: true" in (tmp_path / "geometric" / "config.yaml").read_text()
+    written = (tmp_path / "geometric" / "config.yaml").read_text()
+    assert "demonstration pre-training 2/2" in out.stdout and "geometric_push: true" in written and "geometric_stop: true" in written
 
 
 def net_checkpoint_name(run: Path) -> str:

@@ -10,7 +10,8 @@ map comes from the same layers with their own weights on the unrotated state.
 
 ``push_channels``: the push branch reads its own input (``forward(state, push_input)``), e.g. only the
 question's target map and the height map (``PushQNet(geometric_push=True)``), while the stop branch keeps
-the whole state.
+the whole state. ``stop_channels``: the stop branch reads its own input too (``stop_input``; e.g. those maps
+and the tiled question feature, ``PushQNet(geometric_stop=True)``).
 
 Rotation equivariance by construction: rotating the scene by 90° moves Q of direction d to direction
 d + 2, rotated (``tests/test_push_qnet.py``). Directions follow ``mqa_rl.envs.actions``: d·45°
@@ -38,12 +39,15 @@ class RotatedPushHead(nn.Module):
     """state [B, C, G, G] → [B, directions + 1, G, G]: push maps by direction, then the stop map."""
 
     def __init__(self, state_channels: int, head_channels: tuple[int, ...] = (16, 16), context: int = 2,
-                 directions: int = 8, pad: int = 2, push_channels: int | None = None):
+                 directions: int = 8, pad: int = 2, push_channels: int | None = None,
+                 stop_channels: int | None = None):
         super().__init__()
         width = head_channels[0]
         self.reduce = nn.Sequential(nn.Conv2d(state_channels, width, 1), nn.ReLU(inplace=True))
         self.push_reduce = (nn.Sequential(nn.Conv2d(push_channels, width, 1), nn.ReLU(inplace=True))
                             if push_channels else None)
+        self.stop_reduce = (nn.Sequential(nn.Conv2d(stop_channels, width, 1), nn.ReLU(inplace=True))
+                            if stop_channels else None)
         self.push = _branch(width, context, tuple(head_channels))
         self.stop = _branch(width, context, tuple(head_channels))
         self.directions, self.pad = int(directions), int(pad)
@@ -57,19 +61,24 @@ class RotatedPushHead(nn.Module):
         self.register_buffer("to_image_frame", torch.stack([torch.stack([c, -s, zero], -1),
                                                             torch.stack([s, c, zero], -1)], 1), persistent=False)
 
+    @staticmethod
+    def _own_input(reduce: nn.Module, branch_input: torch.Tensor | None, name: str) -> torch.Tensor:
+        if branch_input is None:
+            raise ValueError(f"this head's {name} branch reads its own input: pass {name}_input to the head")
+        return reduce(branch_input)
+
     def _rotate(self, x: torch.Tensor, theta: torch.Tensor) -> torch.Tensor:
         grid = F.affine_grid(theta.to(x.dtype), list(x.shape), align_corners=False)
         return F.grid_sample(x, grid, mode="bilinear", padding_mode="zeros", align_corners=False)
 
-    def forward(self, state: torch.Tensor, push_input: torch.Tensor | None = None) -> torch.Tensor:
+    def forward(self, state: torch.Tensor, push_input: torch.Tensor | None = None,
+                stop_input: torch.Tensor | None = None) -> torch.Tensor:
         b, _, g, _ = state.shape
         k, p = self.directions, self.pad
         x = self.reduce(state)
-        stop = self.stop(x)
+        stop = self.stop(self._own_input(self.stop_reduce, stop_input, "stop") if self.stop_reduce else x)
         if self.push_reduce is not None:
-            if push_input is None:
-                raise ValueError("this head's push branch reads its own input: call head(state, push_input)")
-            x = self.push_reduce(push_input)
+            x = self._own_input(self.push_reduce, push_input, "push")
         x = F.pad(x, (p, p, p, p))
         x = x.unsqueeze(1).expand(-1, k, -1, -1, -1).reshape(b * k, *x.shape[1:])
         push = self.push(self._rotate(x, self.to_push_frame.repeat(b, 1, 1)))
