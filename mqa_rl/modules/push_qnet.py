@@ -238,8 +238,12 @@ class PushQNet(nn.Module):
 
     def q_map(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor) -> torch.Tensor:
         """[B, 9, 28, 28]: 8 push direction maps and the stop map (batch dims flattened)."""
-        fr, fd, qf, targets = self._features(rgb, depth, question)
-        state = self._state(fr, fd, qf, targets)
+        if self.geometric_push and self.geometric_stop:     # nothing reads the fused state: skip the depth trunk
+            fr, qf = self._rgb_features(rgb), self.question(question)
+            targets, state = self._targets(fr, qf), None
+        else:
+            fr, fd, qf, targets = self._features(rgb, depth, question)
+            state = self._state(fr, fd, qf, targets)
         if not (self.geometric_push or self.geometric_stop):
             return self.head(state)
         geometry = self.geometry(fr, depth, targets)

@@ -43,7 +43,8 @@ class RotatedPushHead(nn.Module):
                  stop_channels: int | None = None):
         super().__init__()
         width = head_channels[0]
-        self.reduce = nn.Sequential(nn.Conv2d(state_channels, width, 1), nn.ReLU(inplace=True))
+        self.reduce = (None if (push_channels and stop_channels)      # neither branch reads the state
+                       else nn.Sequential(nn.Conv2d(state_channels, width, 1), nn.ReLU(inplace=True)))
         self.push_reduce = (nn.Sequential(nn.Conv2d(push_channels, width, 1), nn.ReLU(inplace=True))
                             if push_channels else None)
         self.stop_reduce = (nn.Sequential(nn.Conv2d(stop_channels, width, 1), nn.ReLU(inplace=True))
@@ -71,14 +72,14 @@ class RotatedPushHead(nn.Module):
         grid = F.affine_grid(theta.to(x.dtype), list(x.shape), align_corners=False)
         return F.grid_sample(x, grid, mode="bilinear", padding_mode="zeros", align_corners=False)
 
-    def forward(self, state: torch.Tensor, push_input: torch.Tensor | None = None,
+    def forward(self, state: torch.Tensor | None, push_input: torch.Tensor | None = None,
                 stop_input: torch.Tensor | None = None) -> torch.Tensor:
-        b, _, g, _ = state.shape
+        """``state`` may be None when both branches read their own inputs (it is not computed then)."""
         k, p = self.directions, self.pad
-        x = self.reduce(state)
-        stop = self.stop(self._own_input(self.stop_reduce, stop_input, "stop") if self.stop_reduce else x)
-        if self.push_reduce is not None:
-            x = self._own_input(self.push_reduce, push_input, "push")
+        shared = None if self.reduce is None else self.reduce(state)
+        stop = self.stop(self._own_input(self.stop_reduce, stop_input, "stop") if self.stop_reduce else shared)
+        x = self._own_input(self.push_reduce, push_input, "push") if self.push_reduce else shared
+        b, _, g, _ = x.shape
         x = F.pad(x, (p, p, p, p))
         x = x.unsqueeze(1).expand(-1, k, -1, -1, -1).reshape(b * k, *x.shape[1:])
         push = self.push(self._rotate(x, self.to_push_frame.repeat(b, 1, 1)))
