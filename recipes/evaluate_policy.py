@@ -5,6 +5,7 @@
     python recipes/evaluate_policy.py run=... pusher=arm      # the same policy pushing with the Panda arm
     python recipes/evaluate_policy.py run=... 'policies=[greedy,random,visible_teacher]'   # + its teacher
     python recipes/evaluate_policy.py run=... budget=2    # the greedy policy stops after 2 pushes
+    python recipes/evaluate_policy.py run=... split=train stop_margin=0.5   # choose a stop margin on training scenes
 
 Per level and policy, over the same questions (the env is seeded alike for every policy): mean
 episode reward, pushes, fraction of episodes ending in a simple scene, change of the targets' mean
@@ -33,7 +34,7 @@ from mqa_rl.envs.video import write_video
 from mqa_rl.evaluation.answering_report import write_atomic
 from mqa_rl.evaluation.episode_metrics import mean_ci95
 from mqa_rl.evaluation.rollouts import run_episodes
-from mqa_rl.modules.frozen_policies import PushBudget, make_frozen_policy
+from mqa_rl.modules.frozen_policies import PushBudget, StopMargin, make_frozen_policy
 from mqa_rl.modules.random_policy import RandomMQAPolicy
 from mqa_rl.modules.trained_policy import load_greedy
 
@@ -93,6 +94,7 @@ def main(cfg: DictConfig) -> None:
     threshold = float(reward.get("simple_threshold", 0.2))
     push_memory = cfg.push_memory if cfg.push_memory is not None else (run_cfg.env.get("push_memory") if run_cfg else None)
     push_memory = None if push_memory is None or int(push_memory) < 0 else int(push_memory)
+    write_atomic(out / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))   # what these figures were measured with
     results, lines = {}, []
     for level in cfg.difficulties:
         env = make_mqa_env(str(dataset), reward, episode_stats=True, split=cfg.split, difficulties=[level],
@@ -105,6 +107,8 @@ def main(cfg: DictConfig) -> None:
             reused = reuse_baseline(cfg.baseline_from, name, meta) if cfg.baseline_from and name != "greedy" else None
             if name == "greedy":
                 policy, _, ckpt = load_greedy(Path(cfg.run), cfg.checkpoint, env)
+                if cfg.stop_margin is not None:
+                    policy = StopMargin(policy, float(cfg.stop_margin))
                 if cfg.budget is not None:
                     policy = PushBudget(policy, int(cfg.budget))
 

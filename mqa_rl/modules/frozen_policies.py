@@ -5,7 +5,8 @@ mapping), frozen: nothing here learns.
     {kind: random_masked}                   the same, pushes only inside the action mask
     {kind: none}                            "no manipulation": stop at once (I_stop = I_start)
     {kind: dqn, run: runs/local}            a train_dqn.py run, greedy (newest checkpoint, or checkpoint=...);
-                                            epsilon > 0 makes it ε-greedy (rollouts of a question then differ)
+                                            epsilon > 0 makes it ε-greedy (rollouts of a question then differ);
+                                            stop_margin: m stops only when Q(stop) >= best push + m (StopMargin)
     {kind: privileged, lookahead: 1}        the oracle reference (reads the simulator; see privileged_policy;
                                             order: visible_first, image_visible: true = the visible teacher)
 
@@ -71,6 +72,35 @@ class PushBudget(TensorDictModuleBase):
         return tensordict
 
 
+class StopMargin(TensorDictModuleBase):
+    """A greedy Q policy that stops only when Q(stop) beats its best allowed push by ``margin``.
+
+    Imitation students learn "easy-looking scene -> stop" (97 % of easy episodes stop at once) while their
+    push branch is the part that transfers; a margin > 0 trades stops for the best push. The margin is a
+    decision threshold to choose on the training split (recipes/evaluate_policy.py split=train), never on
+    the test split. ``margin=inf`` never stops (the env's push limit ends the episode)."""
+
+    def __init__(self, policy, margin: float):
+        super().__init__()
+        if margin != margin:
+            raise ValueError("stop_margin is NaN; give a number (0 = plain greedy, inf = never stop)")
+        self.policy, self.margin = policy, float(margin)
+        self.in_keys = list(getattr(policy, "in_keys", []))
+        self.out_keys = list(getattr(policy, "out_keys", [keys.ACTION]))
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        tensordict = self.policy(tensordict)
+        q = tensordict.get(keys.ACTION_VALUE)
+        best_push_q, best_push = q[..., :actions.STOP].max(dim=-1)
+        # masked pushes carry the dtype's min: a scene with no allowed push keeps stopping
+        any_push = best_push_q > torch.finfo(q.dtype).min
+        stop_wins = q[..., actions.STOP] >= best_push_q + self.margin
+        action = tensordict.get(keys.ACTION)
+        chosen = torch.where((action == actions.STOP) & any_push & ~stop_wins, best_push.reshape(action.shape), action)
+        tensordict.set(keys.ACTION, chosen)
+        return tensordict
+
+
 def check_spec(spec: Mapping) -> dict:
     """The spec as a plain dict, checked: a known kind, a run folder with a checkpoint for ``dqn``."""
     spec = dict(spec)
@@ -82,7 +112,7 @@ def check_spec(spec: Mapping) -> dict:
             raise ValueError("a dqn policy needs run=<a recipes/train_dqn.py output folder>")
         if not 0.0 <= float(spec.get("epsilon", 0.0)) <= 1.0:
             raise ValueError(f"dqn epsilon={spec['epsilon']} must lie in [0, 1]")
-    unknown = set(spec) - {"kind", "run", "checkpoint", "epsilon", *PRIVILEGED_OPTIONS}
+    unknown = set(spec) - {"kind", "run", "checkpoint", "epsilon", "stop_margin", *PRIVILEGED_OPTIONS}
     if unknown:
         raise ValueError(f"unknown policy option(s) {sorted(unknown)} for kind {kind!r}")
     return spec
@@ -123,6 +153,8 @@ def make_frozen_policy(spec: Mapping, env, max_pushes: int):
         options = {k: spec[k] for k in PRIVILEGED_OPTIONS if k in spec}
         return PrivilegedPushPolicy(env, **options), ExplorationType.DETERMINISTIC
     actor, run_cfg, _ = load_greedy(Path(spec["run"]), spec.get("checkpoint"), env)
+    if spec.get("stop_margin") is not None:
+        actor = StopMargin(actor, float(spec["stop_margin"]))
     eps = float(spec.get("epsilon", 0.0))
     if eps == 0.0:
         return actor, ExplorationType.DETERMINISTIC
