@@ -37,6 +37,7 @@ def test_margin_zero_is_the_greedy_policy():
 def test_a_stop_that_does_not_beat_the_best_push_by_the_margin_becomes_that_push():
     td = StopMargin(greedy(), 0.5)(state({5: 1.0, 900: 0.9}, stop_value=1.2))
     assert td[keys.ACTION].tolist() == [5, 5]
+    assert td[keys.CHOSEN_ACTION_VALUE].flatten().tolist() == [1.0, 1.0]     # the push's value, not the stop's
     td = StopMargin(greedy(), 0.1)(state({5: 1.0}, stop_value=1.2))      # beats it by 0.2 > 0.1: stops
     assert td[keys.ACTION].tolist() == [actions.STOP, actions.STOP]
 

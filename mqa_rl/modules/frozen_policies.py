@@ -98,6 +98,9 @@ class StopMargin(TensorDictModuleBase):
         action = tensordict.get(keys.ACTION)
         chosen = torch.where((action == actions.STOP) & any_push & ~stop_wins, best_push.reshape(action.shape), action)
         tensordict.set(keys.ACTION, chosen)
+        if keys.CHOSEN_ACTION_VALUE in tensordict.keys():     # Q of the action taken, not of the overruled stop
+            old = tensordict.get(keys.CHOSEN_ACTION_VALUE)
+            tensordict.set(keys.CHOSEN_ACTION_VALUE, q.gather(-1, chosen.reshape(*q.shape[:-1], 1)).reshape(old.shape))
         return tensordict
 
 
