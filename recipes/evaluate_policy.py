@@ -6,6 +6,7 @@
     python recipes/evaluate_policy.py run=... 'policies=[greedy,random,visible_teacher]'   # + its teacher
     python recipes/evaluate_policy.py run=... budget=2    # the greedy policy stops after 2 pushes
     python recipes/evaluate_policy.py run=... split=train stop_margin=0.5   # choose a stop margin on training scenes
+    python recipes/evaluate_policy.py run=... stop_critic=runs/stop/x    # stop learnt by recipes/fit_stop.py
 
 Per level and policy, over the same questions (the env is seeded alike for every policy): mean
 episode reward, pushes, fraction of episodes ending in a simple scene, change of the targets' mean
@@ -35,6 +36,7 @@ from mqa_rl.evaluation.answering_report import write_atomic
 from mqa_rl.evaluation.episode_metrics import mean_ci95
 from mqa_rl.evaluation.rollouts import run_episodes
 from mqa_rl.modules.frozen_policies import PushBudget, StopMargin, make_frozen_policy
+from mqa_rl.modules.learned_stop import LearnedStop
 from mqa_rl.modules.random_policy import RandomMQAPolicy
 from mqa_rl.modules.trained_policy import load_greedy
 
@@ -83,6 +85,8 @@ def main(cfg: DictConfig) -> None:
     out.mkdir(parents=True, exist_ok=True)
     if "greedy" in cfg.policies and not cfg.run:
         raise ValueError("the greedy policy needs run=<a recipes/train_dqn.py output folder>")
+    if cfg.stop_margin is not None and cfg.stop_critic is not None:
+        raise ValueError("stop_margin and stop_critic are two stopping rules: give one of them")
     run_cfg = OmegaConf.load(Path(cfg.run) / "config.yaml") if cfg.run else None
     dataset = cfg.dataset or (run_cfg.dataset if run_cfg else None)
     if dataset is None:
@@ -109,6 +113,8 @@ def main(cfg: DictConfig) -> None:
                 policy, _, ckpt = load_greedy(Path(cfg.run), cfg.checkpoint, env)
                 if cfg.stop_margin is not None:
                     policy = StopMargin(policy, float(cfg.stop_margin))
+                if cfg.stop_critic is not None:
+                    policy = LearnedStop.from_file(policy, cfg.stop_critic, max_pushes)
                 if cfg.budget is not None:
                     policy = PushBudget(policy, int(cfg.budget))
 

@@ -305,6 +305,27 @@ def test_pretrain_then_train_dqn_from_the_recognition_file(small_dataset_dir, tm
     assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-3000:]
     written = (tmp_path / "geometric" / "config.yaml").read_text()
     assert "demonstration pre-training 2/2" in out.stdout and "geometric_push: true" in written and "geometric_stop: true" in written
+    # when to stop, learnt from the geometric student's own episodes on the training split, then used to evaluate it
+    fit = [sys.executable, str(ROOT / "recipes" / "fit_stop.py"), f"run={tmp_path / 'geometric'}", f"out_dir={tmp_path / 'stop'}",
+           "episodes_per_level=4", "difficulties=[hard]", "holdout_fraction=0.5", "critic.steps=20", "threads=1"]
+    out = subprocess.run(fit, capture_output=True, text=True, timeout=600, env=ENV, cwd=tmp_path)
+    assert out.returncode == 0 and "stop critic:" in out.stdout, out.stdout[-2000:] + out.stderr[-3000:]
+    report = json.loads((tmp_path / "stop" / "report.json").read_text())
+    assert 1 <= report["final"]["hard"]["episodes"] <= 4 and report["final"]["hard"]["hindsight"] <= report["final"]["hard"]["after_0"]
+    out = subprocess.run([*fit, "split=test", "overwrite=true"], capture_output=True, text=True, timeout=300, env=ENV, cwd=tmp_path)
+    assert out.returncode != 0 and "split=train" in out.stderr
+    out = subprocess.run(fit, capture_output=True, text=True, timeout=300, env=ENV, cwd=tmp_path)
+    assert out.returncode != 0 and "overwrite=true" in out.stderr            # a fitted critic is never replaced silently
+    ev = tmp_path / "eval_stop"
+    out = subprocess.run([sys.executable, str(ROOT / "recipes" / "evaluate_policy.py"), f"run={tmp_path / 'geometric'}",
+                          f"stop_critic={tmp_path / 'stop'}", "episodes_per_level=2", "difficulties=[hard]", "policies=[greedy]",
+                          "video_episodes=0", f"out_dir={ev}"], capture_output=True, text=True, timeout=600, env=ENV, cwd=tmp_path)
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert json.loads((ev / "results.json").read_text())["hard"]["greedy"]["pushes"]["n"] == 2
+    out = subprocess.run([sys.executable, str(ROOT / "recipes" / "evaluate_policy.py"), f"run={run}",
+                          f"stop_critic={tmp_path / 'stop'}", "episodes_per_level=1", "difficulties=[hard]", "policies=[greedy]",
+                          "video_episodes=0", f"out_dir={ev}"], capture_output=True, text=True, timeout=600, env=ENV, cwd=tmp_path)
+    assert out.returncode != 0 and "another policy" in out.stderr          # fitted for the geometric student, not this run
 
 
 def net_checkpoint_name(run: Path) -> str:

@@ -6,7 +6,8 @@ mapping), frozen: nothing here learns.
     {kind: none}                            "no manipulation": stop at once (I_stop = I_start)
     {kind: dqn, run: runs/local}            a train_dqn.py run, greedy (newest checkpoint, or checkpoint=...);
                                             epsilon > 0 makes it ε-greedy (rollouts of a question then differ);
-                                            stop_margin: m stops only when Q(stop) >= best push + m (StopMargin)
+                                            stop_margin: m stops only when Q(stop) >= best push + m (StopMargin);
+                                            stop_critic: <recipes/fit_stop.py out_dir> stops as it predicts
     {kind: privileged, lookahead: 1}        the oracle reference (reads the simulator; see privileged_policy;
                                             order: visible_first, image_visible: true = the visible teacher)
 
@@ -29,6 +30,7 @@ from torchrl.envs.utils import ExplorationType
 
 from mqa_rl import keys
 from mqa_rl.envs import actions
+from mqa_rl.modules.learned_stop import LearnedStop
 from mqa_rl.modules.privileged_policy import PrivilegedPushPolicy
 from mqa_rl.modules.push_policy import make_explorer
 from mqa_rl.modules.trained_policy import load_greedy
@@ -115,7 +117,9 @@ def check_spec(spec: Mapping) -> dict:
             raise ValueError("a dqn policy needs run=<a recipes/train_dqn.py output folder>")
         if not 0.0 <= float(spec.get("epsilon", 0.0)) <= 1.0:
             raise ValueError(f"dqn epsilon={spec['epsilon']} must lie in [0, 1]")
-    unknown = set(spec) - {"kind", "run", "checkpoint", "epsilon", "stop_margin", *PRIVILEGED_OPTIONS}
+        if spec.get("stop_margin") is not None and spec.get("stop_critic") is not None:
+            raise ValueError("a dqn policy takes stop_margin or stop_critic, not both")
+    unknown = set(spec) - {"kind", "run", "checkpoint", "epsilon", "stop_margin", "stop_critic", *PRIVILEGED_OPTIONS}
     if unknown:
         raise ValueError(f"unknown policy option(s) {sorted(unknown)} for kind {kind!r}")
     return spec
@@ -158,6 +162,8 @@ def make_frozen_policy(spec: Mapping, env, max_pushes: int):
     actor, run_cfg, _ = load_greedy(Path(spec["run"]), spec.get("checkpoint"), env)
     if spec.get("stop_margin") is not None:
         actor = StopMargin(actor, float(spec["stop_margin"]))
+    if spec.get("stop_critic") is not None:
+        actor = LearnedStop.from_file(actor, spec["stop_critic"], max_pushes)
     eps = float(spec.get("epsilon", 0.0))
     if eps == 0.0:
         return actor, ExplorationType.DETERMINISTIC

@@ -236,6 +236,13 @@ class PushQNet(nn.Module):
                   -F.adaptive_max_pool2d(-h, actions.GRID)]
         return torch.cat([targets, presence, *pooled], 1)
 
+    def geometry_maps(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor) -> torch.Tensor:
+        """``geometry`` from the observation: [B, 5, 28, 28] (``class_map``; the learned stop reads it)."""
+        if self.class_head is None:
+            raise RuntimeError("this PushQNet has no class head: build it with class_map=True")
+        fr, qf = self._rgb_features(rgb), self.question(question)
+        return self.geometry(fr, depth, self._targets(fr, qf))
+
     def q_map(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor) -> torch.Tensor:
         """[B, 9, 28, 28]: 8 push direction maps and the stop map (batch dims flattened)."""
         if self.geometric_push and self.geometric_stop:     # nothing reads the fused state: skip the depth trunk

@@ -1,0 +1,171 @@
+"""LearnedStop: a frozen push policy that stops when a critic predicts that pushing on no longer
+lowers the targets' hidden fraction χ.
+
+Why: the imitation students' push branch carries to new scenes, their stop branch does not: it learnt
+"easy-looking scene -> stop" from a teacher whose pushes are better than theirs (97 % of easy
+episodes stop at once), while the same student pushing ten times uncovers more on easy scenes and
+re-covers on hard ones. When to stop is an optimal-stopping problem over the policy's *own* pushes:
+stopping at step t leaves χ_t, pushing on leaves whatever a later stop gives. ``StopCritic`` predicts
+that change of χ from what the policy sees (``stop_features``); it is fitted by
+``mqa_rl.training.optimal_stopping`` on the policy's episodes of the training split
+(``recipes/fit_stop.py``), never on the test split.
+
+A critic belongs to one policy: its file records the policy's weight fingerprint and a critic fitted
+for other weights is refused.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+
+import torch
+from tensordict import TensorDictBase
+from tensordict.nn import TensorDictModuleBase
+from torch import nn
+
+from mqa_rl import keys
+from mqa_rl.envs import actions
+from mqa_rl.modules.push_qnet import PushQNet
+
+CRITIC_FORMAT = "mqa_rl.stop_critic"
+CRITIC_VERSION = 1
+HINT = "fit one for this policy with `python recipes/fit_stop.py run=<the policy's run> out_dir=...`"
+FEATURES = ("stop_advantage", "best_push_q", "pushes_done", "target_mean", "target_max", "target_cells",
+            "presence_mean", "height_mean", "height_max", "height_std", "target_height", "target_relief")
+
+
+def policy_net(policy) -> PushQNet:
+    """The ``PushQNet`` inside a greedy actor (or a wrapper of one)."""
+    net = next((m for m in policy.modules() if isinstance(m, PushQNet)), None)
+    if net is None:
+        raise ValueError("a learned stop needs a push Q-network policy (a recipes/train_dqn.py run)")
+    return net
+
+
+def policy_fingerprint(net: nn.Module) -> str:
+    """SHA-256 over the network's weights: which policy a critic was fitted for."""
+    digest = hashlib.sha256()
+    for name, value in sorted(net.state_dict().items()):
+        digest.update(name.encode())
+        digest.update(value.detach().cpu().contiguous().numpy().tobytes())
+    return digest.hexdigest()
+
+
+@torch.no_grad()
+def stop_features(net: PushQNet, td: TensorDictBase, max_pushes: int) -> torch.Tensor:
+    """[*B, len(FEATURES)] from the observation and the policy's action values (after the policy ran).
+
+    The policy's own view of stopping (Q(stop) − best allowed push, best push), the pushes done, and the
+    clutter the geometric maps show: how much of the question's targets is visible (target map t), how
+    full and how high the pile stands, how high the visible targets sit and how uneven their cells are."""
+    batch = td.batch_size
+    q = td.get(keys.ACTION_VALUE).reshape(-1, actions.NUM_ACTIONS).to(torch.float32)
+    best = q[:, : actions.STOP].max(-1).values
+    best = torch.where(best > torch.finfo(q.dtype).min / 2, best, q[:, actions.STOP])   # no allowed push
+    rgb, depth = td.get(keys.RGB), td.get(keys.DEPTH)
+    maps = net.geometry_maps(rgb.reshape(-1, *rgb.shape[-3:]), depth.reshape(-1, *depth.shape[-3:]),
+                             td.get(keys.QUESTION).reshape(-1, td.get(keys.QUESTION).shape[-1]))
+    t, presence, h_mean, h_max, h_min = maps.unbind(1)
+    weight = t / t.sum((-2, -1), keepdim=True).clamp(min=1e-6)
+    pushes = td.get(keys.PUSH_COUNT).reshape(-1).to(torch.float32)
+    out = torch.stack([
+        q[:, actions.STOP] - best, best, pushes / max(int(max_pushes), 1),
+        t.mean((-2, -1)), t.amax((-2, -1)), (t > 0.5).float().mean((-2, -1)),
+        presence.mean((-2, -1)), h_mean.mean((-2, -1)), h_max.amax((-2, -1)), h_mean.flatten(1).std(-1),
+        (weight * h_mean).sum((-2, -1)), (weight * (h_max - h_min)).sum((-2, -1)),
+    ], -1)
+    return out.reshape(*batch, len(FEATURES))
+
+
+class StopCritic(nn.Module):
+    """Features [*B, F] -> predicted change of the targets' mean χ if the policy pushes on (< 0: it uncovers)."""
+
+    def __init__(self, num_features: int = len(FEATURES), hidden: int = 32):
+        super().__init__()
+        self.hidden = int(hidden)
+        self.register_buffer("mean", torch.zeros(num_features))
+        self.register_buffer("std", torch.ones(num_features))
+        self.mlp = nn.Sequential(nn.Linear(num_features, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh(),
+                                 nn.Linear(hidden, 1))
+
+    def standardise_by(self, features: torch.Tensor) -> None:
+        flat = features.reshape(-1, features.shape[-1])
+        self.mean.copy_(flat.mean(0))
+        self.std.copy_(flat.std(0).clamp(min=1e-6))
+
+    def forward(self, features: torch.Tensor) -> torch.Tensor:
+        return self.mlp((features - self.mean) / self.std).squeeze(-1)
+
+    def save(self, path: str | Path, meta: dict) -> Path:
+        """Weights, sizes and ``meta`` (the policy fingerprint, how it was fitted), written atomically."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        blob = {"format": CRITIC_FORMAT, "version": CRITIC_VERSION, "features": list(FEATURES),
+                "hidden": self.hidden, "state": {k: v.detach().cpu() for k, v in self.state_dict().items()},
+                "meta": dict(meta)}
+        tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+        torch.save(blob, tmp)
+        os.replace(tmp, path)
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path) -> tuple["StopCritic", dict]:
+        """(critic, meta); FileNotFoundError / ValueError that say what to do."""
+        path = Path(path).expanduser()
+        if path.is_dir():
+            path = path / "stop_critic.pt"
+        if not path.is_file():
+            raise FileNotFoundError(f"no stop critic at {path}: {HINT}")
+        try:
+            blob = torch.load(path, map_location="cpu", weights_only=True)
+        except Exception as error:
+            raise ValueError(f"{path} cannot be read ({type(error).__name__}: {error}); it may be truncated: {HINT}") from error
+        if not isinstance(blob, dict) or blob.get("format") != CRITIC_FORMAT:
+            raise ValueError(f"{path} is not a stop-critic file; {HINT}")
+        if int(blob.get("version", 0)) > CRITIC_VERSION:
+            raise ValueError(f"{path} has format version {blob['version']} > {CRITIC_VERSION}: update mqa_rl")
+        if list(blob["features"]) != list(FEATURES):
+            raise ValueError(f"{path} reads features {blob['features']}, this mqa_rl computes {list(FEATURES)}; {HINT}")
+        critic = cls(len(FEATURES), int(blob["hidden"]))
+        try:
+            critic.load_state_dict(blob["state"])
+        except (RuntimeError, KeyError) as error:
+            raise ValueError(f"{path} holds mismatched weights ({error}); {HINT}") from error
+        return critic.eval(), dict(blob.get("meta", {}))
+
+
+class LearnedStop(TensorDictModuleBase):
+    """``policy`` (greedy Q) pushes its best allowed push until ``critic`` predicts that pushing on does not
+    lower χ (prediction >= 0), then stops; a scene without an allowed push stops."""
+
+    def __init__(self, policy, critic: StopCritic, max_pushes: int, fingerprint: str | None = None):
+        super().__init__()
+        self.policy, self.critic, self.max_pushes = policy, critic.eval(), int(max_pushes)
+        self.net = policy_net(policy)
+        if fingerprint is not None and fingerprint != policy_fingerprint(self.net):
+            raise ValueError(f"this stop critic was fitted for another policy's weights; {HINT}")
+        self.in_keys = [*getattr(policy, "in_keys", []), keys.PUSH_COUNT]
+        self.out_keys = list(getattr(policy, "out_keys", [keys.ACTION]))
+
+    @classmethod
+    def from_file(cls, policy, path: str | Path, max_pushes: int) -> "LearnedStop":
+        critic, meta = StopCritic.load(path)
+        return cls(policy, critic, max_pushes, fingerprint=meta.get("policy_fingerprint"))
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        tensordict = self.policy(tensordict)
+        q = tensordict.get(keys.ACTION_VALUE)
+        best_push_q, best_push = q[..., : actions.STOP].max(dim=-1)
+        any_push = best_push_q > torch.finfo(q.dtype).min
+        with torch.no_grad():
+            gain = self.critic(stop_features(self.net, tensordict, self.max_pushes))
+        action = tensordict.get(keys.ACTION)
+        push_on = (any_push & (gain < 0)).reshape(action.shape)
+        chosen = torch.where(push_on, best_push.reshape(action.shape), torch.full_like(action, actions.STOP))
+        tensordict.set(keys.ACTION, chosen)
+        if keys.CHOSEN_ACTION_VALUE in tensordict.keys():
+            old = tensordict.get(keys.CHOSEN_ACTION_VALUE)
+            tensordict.set(keys.CHOSEN_ACTION_VALUE, q.gather(-1, chosen.reshape(*q.shape[:-1], 1)).reshape(old.shape))
+        return tensordict

@@ -1,0 +1,153 @@
+"""Learn when a trained push policy should stop, from its own episodes on the training split.
+
+    python recipes/fit_stop.py run=checkpoints/dqn_geometric_student out_dir=runs/stop/geometric_student
+    python recipes/evaluate_policy.py run=checkpoints/dqn_geometric_student stop_critic=runs/stop/geometric_student
+
+The policy pushes greedily without stopping (its best allowed push, ``env.max_pushes`` times) over
+``episodes_per_level`` training questions per level; every state's features (``stop_features``) and the
+targets' χ are kept (``trajectories/<level>.pt``, written per level: an interrupted run continues with the
+missing levels). A ``StopCritic`` is fitted by optimal stopping (``mqa_rl.training.optimal_stopping``) on
+the episodes of 80 % of the training scenes and scored on the other 20 % against the fixed rules (stop at
+once, after k pushes, never) and the hindsight best; then refitted on all episodes and written as
+``stop_critic.pt`` with that report (``report.json``). The test split is never read.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import time
+from pathlib import Path
+
+import hydra
+import torch
+from omegaconf import DictConfig, OmegaConf
+
+from mqa_rl import keys
+from mqa_rl.envs.factory import make_mqa_env
+from mqa_rl.evaluation.answering_report import write_atomic
+from mqa_rl.modules.frozen_policies import StopMargin
+from mqa_rl.modules.learned_stop import FEATURES, policy_fingerprint, policy_net, stop_features
+from mqa_rl.modules.trained_policy import load_greedy
+from mqa_rl.training.optimal_stopping import fit_stop_critic, fixed_rules, stopped_chi
+from mqa_rl.transforms.episode_stats import mean_target_chi
+
+
+def collect_level(env, policy, net, episodes: int, max_pushes: int) -> dict:
+    """Never-stopping episodes of ``policy``: features [E, T, F], χ [E, T + 1], valid [E, T], scene ids."""
+    feats, chis, valid, scenes = [], [], [], []
+    with torch.no_grad():
+        for _ in range(episodes):
+            rollout = env.rollout(max_pushes + 1, policy, break_when_any_done=True)
+            if not bool(rollout[0].get(keys.TARGET_MASK).any()):
+                continue                                   # no target (a count of 0): χ undefined
+            steps = rollout.shape[0]
+            f = stop_features(net, rollout, max_pushes)
+            chi = torch.cat([mean_target_chi(rollout).squeeze(-1), mean_target_chi(rollout["next"][-1:]).squeeze(-1)])
+            pad = max_pushes - steps
+            feats.append(torch.cat([f, f[-1:].expand(pad, -1)]) if pad > 0 else f[:max_pushes])
+            chis.append(torch.cat([chi, chi[-1:].expand(pad)]) if pad > 0 else chi[: max_pushes + 1])
+            valid.append(torch.arange(max_pushes) < min(steps, max_pushes))
+            scenes.append(env.base_env.question.scene_id)
+    if not feats:
+        return {"features": torch.zeros(0, max_pushes, len(FEATURES)), "chi": torch.zeros(0, max_pushes + 1),
+                "valid": torch.zeros(0, max_pushes, dtype=torch.bool), "scenes": []}
+    return {"features": torch.stack(feats), "chi": torch.stack(chis), "valid": torch.stack(valid), "scenes": scenes}
+
+
+def held_out(scenes: list[str], fraction: float) -> torch.Tensor:
+    """[E] bool: the episodes of a fixed ``fraction`` of the scenes (by a hash of their id)."""
+    cut = int(round(fraction * 1000))
+    return torch.tensor([int(hashlib.sha256(s.encode()).hexdigest(), 16) % 1000 < cut for s in scenes])
+
+
+def score(critic, data: dict, rows: torch.Tensor) -> dict:
+    f, chi, valid = data["features"][rows], data["chi"][rows], data["valid"][rows]
+    with torch.no_grad():
+        stop = (critic(f) >= 0) & valid
+    return {"episodes": int(rows.sum()), "learned": float(stopped_chi(chi, stop, valid).mean()),
+            "learned_pushes": float((~stop & valid).long().cumprod(1).sum(1).float().mean()), **fixed_rules(chi, valid)}
+
+
+@hydra.main(config_path="conf", config_name="fit_stop", version_base="1.3")
+def main(cfg: DictConfig) -> None:
+    if not cfg.run or not cfg.out_dir:
+        raise ValueError("give run=<a recipes/train_dqn.py run or exported policy folder> and out_dir=<where to write>")
+    if cfg.split == "test":
+        raise ValueError("split=test: a stop rule fitted on the test split would be judged on what it was fitted to; "
+                         "fit on split=train")
+    out, run = Path(cfg.out_dir), Path(cfg.run)
+    if (out / "stop_critic.pt").exists() and not cfg.overwrite:
+        raise FileExistsError(f"{out / 'stop_critic.pt'} exists: choose another out_dir, or overwrite=true")
+    if not (run / "config.yaml").exists():
+        raise FileNotFoundError(f"{run / 'config.yaml'} not found: run= must be a recipes/train_dqn.py output folder")
+    run_cfg = OmegaConf.load(run / "config.yaml")
+    dataset = str(cfg.dataset or run_cfg.dataset)
+    max_pushes = int(run_cfg.env.max_pushes)
+    push_memory = run_cfg.env.get("push_memory")
+    push_memory = None if push_memory is None or int(push_memory) < 0 else int(push_memory)
+    torch.set_num_threads(int(cfg.threads))
+    write_atomic(out / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))
+    levels, started = {}, time.time()
+    for level in cfg.difficulties:
+        env = make_mqa_env(dataset, OmegaConf.to_container(run_cfg.reward), split=cfg.split, difficulties=[level], max_pushes=max_pushes,
+                           question_types=list(run_cfg.env.question_types), push_memory=push_memory)
+        try:
+            actor, _, checkpoint = load_greedy(run, cfg.checkpoint, env)
+            net = policy_net(actor)
+            meta = {"run": str(run.resolve()), "checkpoint": Path(checkpoint).name, "policy_fingerprint": policy_fingerprint(net),
+                    "dataset": str(Path(dataset).resolve()), "split": cfg.split, "level": level, "seed": int(cfg.seed),
+                    "episodes": int(cfg.episodes_per_level), "max_pushes": max_pushes, "push_memory": push_memory}
+            path = out / "trajectories" / f"{level}.pt"
+            saved = torch.load(path, weights_only=False) if path.is_file() else None
+            if saved is not None and saved["meta"] == meta:
+                print(f"{level}: {saved['data']['chi'].shape[0]} episodes reused from {path}", flush=True)
+                levels[level] = saved["data"]
+                continue
+            env.base_env.set_seed(int(cfg.seed))
+            tick = time.time()
+            data = collect_level(env, StopMargin(actor, float("inf")), net, int(cfg.episodes_per_level), max_pushes)
+            buffer = io.BytesIO()
+            torch.save({"meta": meta, "data": data}, buffer)
+            write_atomic(path, buffer.getvalue())
+            levels[level] = data
+            print(f"{level}: {data['chi'].shape[0]} episodes with targets in {time.time() - tick:.0f} s", flush=True)
+        finally:
+            env.close()
+    data = {k: torch.cat([levels[lv][k] for lv in levels]) for k in ("features", "chi", "valid")}
+    data["scenes"] = [s for lv in levels for s in levels[lv]["scenes"]]
+    if data["chi"].shape[0] == 0:
+        raise ValueError(f"no episode had a target of its question (counts of 0): raise episodes_per_level "
+                         f"(now {cfg.episodes_per_level})")
+    level_of = torch.cat([torch.full((levels[lv]["chi"].shape[0],), i) for i, lv in enumerate(levels)])
+    fit_options = dict(hidden=int(cfg.critic.hidden), iterations=int(cfg.critic.iterations), steps=int(cfg.critic.steps),
+                       lr=float(cfg.critic.lr), weight_decay=float(cfg.critic.weight_decay), seed=int(cfg.seed))
+    hold = held_out(data["scenes"], float(cfg.holdout_fraction))
+    report = {"collect_and_fit_s": None, "fit_episodes": int((~hold).sum()), "held_out_episodes": int(hold.sum())}
+    if hold.any() and (~hold).any():
+        part = {k: data[k][~hold] for k in ("features", "chi", "valid")}
+        critic, history = fit_stop_critic(part["features"], part["chi"], part["valid"], **fit_options)
+        report["validation"] = {"history": history}
+        for i, level in enumerate(levels):
+            report["validation"][level] = {"fit": score(critic, data, ~hold & (level_of == i)),
+                                           "held_out": score(critic, data, hold & (level_of == i))}
+    critic, history = fit_stop_critic(data["features"], data["chi"], data["valid"], **fit_options)
+    report["final"] = {"history": history, **{lv: score(critic, data, level_of == i) for i, lv in enumerate(levels)}}
+    report["collect_and_fit_s"] = round(time.time() - started, 1)
+    meta = {"policy_fingerprint": policy_fingerprint(net), "run": str(run), "checkpoint": Path(checkpoint).name,
+            "split": cfg.split, "episodes": int(data["chi"].shape[0]), "fit": fit_options}
+    critic.save(out / "stop_critic.pt", meta)
+    write_atomic(out / "report.json", json.dumps(report, indent=2))
+    rules = ("after_0", "after_1", "after_3", f"after_{max_pushes}", "hindsight")
+    print("mean final χ of the targets (held-out training scenes where a level has some; lower is better):")
+    print(f"{'level':>7} {'learned':>8} {'pushes':>7} " + " ".join(f"{r:>10}" for r in rules))
+    for level in levels:
+        row = report.get("validation", {}).get(level, {}).get("held_out")
+        row = row if row and row["episodes"] else report["final"][level]
+        print(f"{level:>7} {row['learned']:8.3f} {row['learned_pushes']:7.2f} " + " ".join(f"{row[r]:10.3f}" for r in rules))
+    print(f"stop critic: {out / 'stop_critic.pt'} ({report['collect_and_fit_s']} s)")
+
+
+if __name__ == "__main__":
+    main()

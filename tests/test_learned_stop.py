@@ -1,0 +1,131 @@
+"""The learned stop: optimal stopping by regression on a policy's own paths, its features, the stop
+rule on a real Q-network actor, and its file."""
+
+import pytest
+import torch
+from tensordict import TensorDict
+from torchrl.data import Categorical
+
+from mqa_rl import keys
+from mqa_rl.envs import actions
+from mqa_rl.modules.learned_stop import FEATURES, LearnedStop, StopCritic, policy_fingerprint, stop_features
+from mqa_rl.modules.push_policy import make_q_actor
+from mqa_rl.modules.push_qnet import PushQNet
+from mqa_rl.training.optimal_stopping import fit_stop_critic, fixed_rules, realised_values, stopped_chi
+from torch_threads import one_torch_thread  # noqa: F401  (autouse)
+
+VOCAB, S = 30, 224
+
+
+def test_realised_values_follow_the_rule_along_each_path():
+    chi = torch.tensor([[0.5, 0.3, 0.4], [0.6, 0.6, 0.6]])
+    valid = torch.tensor([[True, True], [True, False]])          # the second episode ended after one push
+    never = torch.zeros(2, 2, dtype=torch.bool)
+    assert realised_values(chi, never, valid)[:, 0].tolist() == pytest.approx([0.4, 0.6])
+    at_one = torch.tensor([[False, True], [False, True]])
+    assert stopped_chi(chi, at_one, valid).tolist() == pytest.approx([0.3, 0.6])
+    rules = fixed_rules(chi, valid)
+    assert rules["after_0"] == pytest.approx(0.55) and rules["after_1"] == pytest.approx(0.45)
+    assert rules["after_2"] == pytest.approx(0.5) and rules["hindsight"] == pytest.approx(0.45)
+
+
+def test_the_fit_learns_to_push_on_where_pushing_uncovers_and_to_stop_where_it_covers():
+    """Two kinds of scene told apart by one feature: in one each push lowers χ, in the other it raises it;
+    the best rule pushes to the end in the first and stops at once in the second (hindsight optimum)."""
+    g = torch.Generator().manual_seed(0)
+    episodes, steps = 200, 5
+    kind = torch.rand(episodes, generator=g) < 0.5
+    slope = torch.where(kind, -0.08, 0.08)[:, None]
+    chi = 0.5 + slope * torch.arange(steps + 1) + 0.01 * torch.randn(episodes, steps + 1, generator=g)
+    features = torch.randn(episodes, steps, len(FEATURES), generator=g)
+    features[..., 0] = kind[:, None].float() + 0.05 * torch.randn(episodes, steps, generator=g)
+    valid = torch.ones(episodes, steps, dtype=torch.bool)
+    critic, history = fit_stop_critic(features, chi, valid, steps=400, iterations=2)
+    with torch.no_grad():
+        stop = critic(features) >= 0
+    assert stop[~kind, 0].float().mean() > 0.95 and (~stop[kind]).float().mean() > 0.95
+    learned = stopped_chi(chi, stop, valid).mean()
+    assert learned < min(fixed_rules(chi, valid)[f"after_{k}"] for k in range(steps + 1)) - 0.1
+    assert history[-1]["chi_end"] == pytest.approx(float(learned), abs=1e-6)
+
+
+def test_the_fit_refuses_paths_without_targets():
+    chi = torch.full((3, 3), float("nan"))
+    with pytest.raises(ValueError, match="without targets"):
+        fit_stop_critic(torch.zeros(3, 2, len(FEATURES)), chi, torch.ones(3, 2, dtype=torch.bool))
+
+
+def _actor(seed=0):
+    torch.manual_seed(seed)
+    net = PushQNet(VOCAB, camera_distance=0.9, class_map=True, num_classes=5, light_channels=(8, 8, 16, 16),
+                   light_downsample=2, fuse_channels=(16, 8), head_channels=(8, 8), head_context=1, rotated_head=True,
+                   geometric_push=True).eval()
+    return make_q_actor(net, Categorical(actions.NUM_ACTIONS), masked=True), net
+
+
+def _state(batch=2, masked=()):
+    g = torch.Generator().manual_seed(1)
+    mask = torch.ones(batch, actions.NUM_ACTIONS, dtype=torch.bool)
+    mask[:, list(masked)] = False
+    return TensorDict({keys.RGB: torch.randint(0, 256, (batch, 3, S, S), dtype=torch.uint8, generator=g),
+                       keys.DEPTH: 0.8 + 0.1 * torch.rand(batch, 1, S, S, generator=g),
+                       keys.QUESTION: torch.randint(1, VOCAB, (batch, 6), generator=g),
+                       keys.ACTION_MASK: mask, keys.PUSH_COUNT: torch.tensor([[0], [3]])}, batch_size=[batch])
+
+
+def _constant_critic(value: float) -> StopCritic:
+    critic = StopCritic()
+    for p in critic.parameters():
+        torch.nn.init.zeros_(p)
+    critic.mlp[-1].bias.data.fill_(value)
+    return critic
+
+
+def test_features_read_the_policys_values_and_the_geometry():
+    actor, net = _actor()
+    td = actor(_state())
+    f = stop_features(net, td, max_pushes=10)
+    assert f.shape == (2, len(FEATURES)) and torch.isfinite(f).all()
+    q = td[keys.ACTION_VALUE]
+    torch.testing.assert_close(f[:, 0], q[:, actions.STOP] - q[:, : actions.STOP].max(-1).values)
+    assert f[:, FEATURES.index("pushes_done")].tolist() == pytest.approx([0.0, 0.3])
+    maps = net.geometry_maps(td[keys.RGB], td[keys.DEPTH], td[keys.QUESTION])
+    torch.testing.assert_close(f[:, FEATURES.index("target_mean")], maps[:, 0].mean((-2, -1)))
+
+
+def test_the_policy_pushes_its_best_allowed_push_while_the_critic_predicts_a_gain_then_stops():
+    actor, _ = _actor()
+    plain = actor(_state())
+    best = int(plain[keys.ACTION_VALUE][0, : actions.STOP].argmax())
+    td = LearnedStop(actor, _constant_critic(-0.1), max_pushes=10)(_state(masked=[best]))
+    assert (td[keys.ACTION] != actions.STOP).all() and (td[keys.ACTION] != best).all()   # an allowed push
+    assert td[keys.ACTION_MASK].gather(-1, td[keys.ACTION][:, None]).all()
+    q = td[keys.ACTION_VALUE]
+    torch.testing.assert_close(td[keys.CHOSEN_ACTION_VALUE].flatten(), q.gather(-1, td[keys.ACTION][:, None]).flatten())
+    td = LearnedStop(actor, _constant_critic(0.1), max_pushes=10)(_state())
+    assert (td[keys.ACTION] == actions.STOP).all()
+    td = LearnedStop(actor, _constant_critic(-0.1), max_pushes=10)(_state(masked=range(actions.NUM_PUSHES)))
+    assert (td[keys.ACTION] == actions.STOP).all()                  # nothing allowed to push: it stops
+
+
+def test_the_critic_file_round_trips_and_bad_files_are_refused(tmp_path):
+    actor, net = _actor()
+    critic = _constant_critic(-0.2)
+    critic.standardise_by(torch.randn(50, len(FEATURES)))
+    path = critic.save(tmp_path / "stop" / "stop_critic.pt", {"policy_fingerprint": policy_fingerprint(net)})
+    loaded, meta = StopCritic.load(tmp_path / "stop")                  # the folder finds its stop_critic.pt
+    x = torch.randn(4, len(FEATURES))
+    torch.testing.assert_close(loaded(x), critic(x))
+    assert isinstance(LearnedStop.from_file(actor, path, 10), LearnedStop)
+    other, _ = _actor(seed=1)
+    with pytest.raises(ValueError, match="another policy"):
+        LearnedStop.from_file(other, path, 10)
+    with pytest.raises(FileNotFoundError, match="fit_stop.py"):
+        StopCritic.load(tmp_path / "nowhere")
+    (tmp_path / "cut.pt").write_bytes(path.read_bytes()[:200])
+    with pytest.raises(ValueError, match="truncated"):
+        StopCritic.load(tmp_path / "cut.pt")
+    torch.save({"format": "something else"}, tmp_path / "foreign.pt")
+    with pytest.raises(ValueError, match="not a stop-critic file"):
+        StopCritic.load(tmp_path / "foreign.pt")
+    assert not list((tmp_path / "stop").glob(".*tmp*"))                # nothing half-written left behind
