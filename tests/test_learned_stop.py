@@ -1,6 +1,8 @@
 """The learned stop: optimal stopping by regression on a policy's own paths, its features, the stop
 rule on a real Q-network actor, and its file."""
 
+from pathlib import Path
+
 import pytest
 import torch
 from tensordict import TensorDict
@@ -15,6 +17,7 @@ from mqa_rl.training.optimal_stopping import fit_stop_critic, fixed_rules, reali
 from torch_threads import one_torch_thread  # noqa: F401  (autouse)
 
 VOCAB, S = 30, 224
+ROOT = Path(__file__).parents[1]
 
 
 def test_realised_values_follow_the_rule_along_each_path():
@@ -129,3 +132,9 @@ def test_the_critic_file_round_trips_and_bad_files_are_refused(tmp_path):
     with pytest.raises(ValueError, match="not a stop-critic file"):
         StopCritic.load(tmp_path / "foreign.pt")
     assert not list((tmp_path / "stop").glob(".*tmp*"))                # nothing half-written left behind
+
+
+def test_the_shipped_critic_loads_and_names_its_policy():
+    critic, meta = StopCritic.load(ROOT / "checkpoints" / "stop_geometric_student")
+    assert meta["run"] == "checkpoints/dqn_geometric_student" and len(meta["policy_fingerprint"]) == 64
+    assert critic(torch.zeros(3, len(FEATURES))).shape == (3,)

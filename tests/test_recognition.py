@@ -322,6 +322,14 @@ def test_pretrain_then_train_dqn_from_the_recognition_file(small_dataset_dir, tm
                           "video_episodes=0", f"out_dir={ev}"], capture_output=True, text=True, timeout=600, env=ENV, cwd=tmp_path)
     assert out.returncode == 0, out.stderr[-3000:]
     assert json.loads((ev / "results.json").read_text())["hard"]["greedy"]["pushes"]["n"] == 2
+    from mqa_rl.modules.frozen_policies import make_frozen_policy
+    from mqa_rl.modules.learned_stop import LearnedStop
+
+    spec = {"kind": "dqn", "run": str(tmp_path / "geometric"), "stop_critic": str(tmp_path / "stop")}
+    policy, _ = make_frozen_policy(spec, SapienBinEnv(small_dataset_dir, split="test"), max_pushes=3)
+    assert isinstance(policy, LearnedStop)                               # an answering system can use it too
+    with pytest.raises(ValueError, match="not both"):
+        make_frozen_policy({**spec, "stop_margin": 0.5}, None, max_pushes=3)
     out = subprocess.run([sys.executable, str(ROOT / "recipes" / "evaluate_policy.py"), f"run={run}",
                           f"stop_critic={tmp_path / 'stop'}", "episodes_per_level=1", "difficulties=[hard]", "policies=[greedy]",
                           "video_episodes=0", f"out_dir={ev}"], capture_output=True, text=True, timeout=600, env=ENV, cwd=tmp_path)
