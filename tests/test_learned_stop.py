@@ -111,6 +111,13 @@ def test_the_policy_pushes_its_best_allowed_push_while_the_critic_predicts_a_gai
     assert (td[keys.ACTION] == actions.STOP).all()                  # nothing allowed to push: it stops
 
 
+def test_a_policy_without_a_target_map_is_refused():
+    net = PushQNet(VOCAB, camera_distance=0.9, light_channels=(8, 8, 16, 16), light_downsample=2, fuse_channels=(16, 8),
+                   head_channels=(8,))
+    with pytest.raises(ValueError, match="class_map"):
+        LearnedStop(make_q_actor(net, Categorical(actions.NUM_ACTIONS)), _constant_critic(0.0), max_pushes=10)
+
+
 def test_the_critic_file_round_trips_and_bad_files_are_refused(tmp_path):
     actor, net = _actor()
     critic = _constant_critic(-0.2)
@@ -123,7 +130,7 @@ def test_the_critic_file_round_trips_and_bad_files_are_refused(tmp_path):
     other, _ = _actor(seed=1)
     with pytest.raises(ValueError, match="another policy"):
         LearnedStop.from_file(other, path, 10)
-    with pytest.raises(FileNotFoundError, match="fit_stop.py"):
+    with pytest.raises(FileNotFoundError, match="no stop-critic file"):
         StopCritic.load(tmp_path / "nowhere")
     (tmp_path / "cut.pt").write_bytes(path.read_bytes()[:200])
     with pytest.raises(ValueError, match="truncated"):

@@ -17,7 +17,6 @@ for other weights is refused.
 from __future__ import annotations
 
 import hashlib
-import os
 from pathlib import Path
 
 import torch
@@ -28,6 +27,7 @@ from torch import nn
 from mqa_rl import keys
 from mqa_rl.envs import actions
 from mqa_rl.modules.push_qnet import PushQNet
+from mqa_rl.training.versioned_file import load_versioned, save_versioned
 
 CRITIC_FORMAT = "mqa_rl.stop_critic"
 CRITIC_VERSION = 1
@@ -41,6 +41,9 @@ def policy_net(policy) -> PushQNet:
     net = next((m for m in policy.modules() if isinstance(m, PushQNet)), None)
     if net is None:
         raise ValueError("a learned stop needs a push Q-network policy (a recipes/train_dqn.py run)")
+    if net.class_head is None:
+        raise ValueError("a learned stop reads the policy's target map: the run needs model.class_map=true "
+                         "(e.g. profile=cpu_geometric_student)")
     return net
 
 
@@ -100,15 +103,9 @@ class StopCritic(nn.Module):
 
     def save(self, path: str | Path, meta: dict) -> Path:
         """Weights, sizes and ``meta`` (the policy fingerprint, how it was fitted), written atomically."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        blob = {"format": CRITIC_FORMAT, "version": CRITIC_VERSION, "features": list(FEATURES),
-                "hidden": self.hidden, "state": {k: v.detach().cpu() for k, v in self.state_dict().items()},
-                "meta": dict(meta)}
-        tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-        torch.save(blob, tmp)
-        os.replace(tmp, path)
-        return path
+        blob = {"features": list(FEATURES), "hidden": self.hidden,
+                "state": {k: v.detach().cpu() for k, v in self.state_dict().items()}, "meta": dict(meta)}
+        return save_versioned(path, CRITIC_FORMAT, CRITIC_VERSION, blob)
 
     @classmethod
     def load(cls, path: str | Path) -> tuple["StopCritic", dict]:
@@ -116,16 +113,7 @@ class StopCritic(nn.Module):
         path = Path(path).expanduser()
         if path.is_dir():
             path = path / "stop_critic.pt"
-        if not path.is_file():
-            raise FileNotFoundError(f"no stop critic at {path}: {HINT}")
-        try:
-            blob = torch.load(path, map_location="cpu", weights_only=True)
-        except Exception as error:
-            raise ValueError(f"{path} cannot be read ({type(error).__name__}: {error}); it may be truncated: {HINT}") from error
-        if not isinstance(blob, dict) or blob.get("format") != CRITIC_FORMAT:
-            raise ValueError(f"{path} is not a stop-critic file; {HINT}")
-        if int(blob.get("version", 0)) > CRITIC_VERSION:
-            raise ValueError(f"{path} has format version {blob['version']} > {CRITIC_VERSION}: update mqa_rl")
+        blob = load_versioned(path, CRITIC_FORMAT, CRITIC_VERSION, what="stop-critic file", hint=HINT)
         if list(blob["features"]) != list(FEATURES):
             raise ValueError(f"{path} reads features {blob['features']}, this mqa_rl computes {list(FEATURES)}; {HINT}")
         critic = cls(len(FEATURES), int(blob["hidden"]))

@@ -9,10 +9,9 @@ checkpoint holds these weights itself: evaluating or demoing it never needs this
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
-import torch
+from mqa_rl.training.versioned_file import load_versioned, save_versioned
 
 RECOGNITION_FORMAT = "mqa_rl.push_recognition"
 RECOGNITION_VERSION = 1
@@ -30,16 +29,10 @@ def _architecture(net) -> dict:
 
 def save_recognition(net, path: str | Path, classes, meta: dict) -> Path:
     """Write ``net``'s recognition modules (``VISUAL`` + ``QUESTION``), the class names and ``meta`` atomically."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    blob = {"format": RECOGNITION_FORMAT, "version": RECOGNITION_VERSION, "classes": list(classes),
-            "architecture": _architecture(net), "meta": dict(meta)}
+    blob = {"classes": list(classes), "architecture": _architecture(net), "meta": dict(meta)}
     for name in (*VISUAL, *QUESTION):
         blob[name] = {k: v.detach().cpu() for k, v in getattr(net, name).state_dict().items()}
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    torch.save(blob, tmp)
-    os.replace(tmp, path)
-    return path
+    return save_versioned(path, RECOGNITION_FORMAT, RECOGNITION_VERSION, blob)
 
 
 def load_recognition(net, path: str | Path, classes, freeze: bool = True) -> dict:
@@ -48,16 +41,7 @@ def load_recognition(net, path: str | Path, classes, freeze: bool = True) -> dic
     path = Path(path).expanduser()
     if net.class_head is None:
         raise ValueError(f"model.pretrained={path} needs model.class_map=true (the class head it fills)")
-    if not path.is_file():
-        raise FileNotFoundError(f"no recognition file at {path}: {HINT}")
-    try:
-        blob = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as error:
-        raise ValueError(f"{path} cannot be read ({type(error).__name__}: {error}); it may be truncated: {HINT}") from error
-    if not isinstance(blob, dict) or blob.get("format") != RECOGNITION_FORMAT:
-        raise ValueError(f"{path} is not a push-recognition file; {HINT}")
-    if int(blob.get("version", 0)) > RECOGNITION_VERSION:
-        raise ValueError(f"{path} has format version {blob['version']} > {RECOGNITION_VERSION}: update mqa_rl")
+    blob = load_versioned(path, RECOGNITION_FORMAT, RECOGNITION_VERSION, what="push-recognition file", hint=HINT)
     if list(blob["classes"]) != list(classes):
         raise ValueError(f"{path} was trained on classes {blob['classes'][:4]}… of another dataset, not this one's "
                          f"{list(classes)[:4]}…; {HINT} on this dataset")
