@@ -6,7 +6,7 @@
 #      MQA_TRAIN=1 trains whatever runs/ lacks instead of using what ships
 #   2. rollouts of random; the VQA encoder pretrained on their frames (~28 min), or the shipped one
 #      (checkpoints/vqa_encoder, pretrained on the same frames) unless MQA_TRAIN=1
-#   3. per system (random, no manipulation, privileged, DQN(R_g), DQN(R_l), DQN(R_g+R_l)): rollouts, its VQA
+#   3. per system (random, no manipulation, privileged, DQN(R_g), DQN(R_l), DQN(R_g+R_l), our student): rollouts, its VQA
 #   4. Table III, per type, policies, Fig. 7                       -> runs/answering/report/counting-eqa
 # Each system is complete before the next starts, and every step resumes or skips what is done, so an
 # interrupted run continues where it stopped and evaluate.py reports the systems finished so far.
@@ -41,7 +41,7 @@ else
   step "VQA encoder pretraining"
   python recipes/pretrain_vqa_encoder.py "${EXTRA[@]}" resume=true
 fi
-for s in random no_manipulation privileged dqn_global dqn_local dqn_global_local; do
+for s in random no_manipulation privileged dqn_global dqn_local dqn_global_local dqn_student; do
   step "rollouts of $s"
   python recipes/collect_rollouts.py "${EXTRA[@]}" "system=$s"     # random's: already complete, skipped
   step "VQA of $s"
