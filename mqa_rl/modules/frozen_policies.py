@@ -33,6 +33,7 @@ from mqa_rl.envs import actions
 from mqa_rl.modules.learned_stop import LearnedStop
 from mqa_rl.modules.privileged_policy import PrivilegedPushPolicy
 from mqa_rl.modules.push_policy import make_explorer
+from mqa_rl.modules.q_override import best_allowed_push, take_action
 from mqa_rl.modules.trained_policy import load_greedy
 from mqa_rl.modules.random_policy import RandomMQAPolicy
 from mqa_rl.training.checkpoint import newest_checkpoint
@@ -93,17 +94,11 @@ class StopMargin(TensorDictModuleBase):
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         tensordict = self.policy(tensordict)
         q = tensordict.get(keys.ACTION_VALUE)
-        best_push_q, best_push = q[..., :actions.STOP].max(dim=-1)
-        # masked pushes carry the dtype's min: a scene with no allowed push keeps stopping
-        any_push = best_push_q > torch.finfo(q.dtype).min
+        best_push_q, best_push, any_push = best_allowed_push(q)    # a scene with no allowed push keeps stopping
         stop_wins = q[..., actions.STOP] >= best_push_q + self.margin
         action = tensordict.get(keys.ACTION)
         chosen = torch.where((action == actions.STOP) & any_push & ~stop_wins, best_push.reshape(action.shape), action)
-        tensordict.set(keys.ACTION, chosen)
-        if keys.CHOSEN_ACTION_VALUE in tensordict.keys():     # Q of the action taken, not of the overruled stop
-            old = tensordict.get(keys.CHOSEN_ACTION_VALUE)
-            tensordict.set(keys.CHOSEN_ACTION_VALUE, q.gather(-1, chosen.reshape(*q.shape[:-1], 1)).reshape(old.shape))
-        return tensordict
+        return take_action(tensordict, q, chosen)       # Q of the action taken, not of the overruled stop
 
 
 def check_spec(spec: Mapping) -> dict:

@@ -27,6 +27,7 @@ from torch import nn
 from mqa_rl import keys
 from mqa_rl.envs import actions
 from mqa_rl.modules.push_qnet import PushQNet
+from mqa_rl.modules.q_override import best_allowed_push, take_action
 from mqa_rl.training.versioned_file import load_versioned, save_versioned
 
 CRITIC_FORMAT = "mqa_rl.stop_critic"
@@ -65,8 +66,8 @@ def stop_features(net: PushQNet, td: TensorDictBase, max_pushes: int) -> torch.T
     full and how high the pile stands, how high the visible targets sit and how uneven their cells are."""
     batch = td.batch_size
     q = td.get(keys.ACTION_VALUE).reshape(-1, actions.NUM_ACTIONS).to(torch.float32)
-    best = q[:, : actions.STOP].max(-1).values
-    best = torch.where(best > torch.finfo(q.dtype).min / 2, best, q[:, actions.STOP])   # no allowed push
+    best, _, any_push = best_allowed_push(q)
+    best = torch.where(any_push, best, q[:, actions.STOP])          # no allowed push: no advantage over stop
     rgb, depth = td.get(keys.RGB), td.get(keys.DEPTH)
     maps = net.geometry_maps(rgb.reshape(-1, *rgb.shape[-3:]), depth.reshape(-1, *depth.shape[-3:]),
                              td.get(keys.QUESTION).reshape(-1, td.get(keys.QUESTION).shape[-1]))
@@ -145,15 +146,10 @@ class LearnedStop(TensorDictModuleBase):
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         tensordict = self.policy(tensordict)
         q = tensordict.get(keys.ACTION_VALUE)
-        best_push_q, best_push = q[..., : actions.STOP].max(dim=-1)
-        any_push = best_push_q > torch.finfo(q.dtype).min
+        _, best_push, any_push = best_allowed_push(q)
         with torch.no_grad():
             gain = self.critic(stop_features(self.net, tensordict, self.max_pushes))
         action = tensordict.get(keys.ACTION)
         push_on = (any_push & (gain < 0)).reshape(action.shape)
         chosen = torch.where(push_on, best_push.reshape(action.shape), torch.full_like(action, actions.STOP))
-        tensordict.set(keys.ACTION, chosen)
-        if keys.CHOSEN_ACTION_VALUE in tensordict.keys():
-            old = tensordict.get(keys.CHOSEN_ACTION_VALUE)
-            tensordict.set(keys.CHOSEN_ACTION_VALUE, q.gather(-1, chosen.reshape(*q.shape[:-1], 1)).reshape(old.shape))
-        return tensordict
+        return take_action(tensordict, q, chosen)

@@ -6,20 +6,19 @@ Used by the push recognition file and the stop critic; training checkpoints use 
 
 from __future__ import annotations
 
-import os
+import io
 from pathlib import Path
 
 import torch
 
+from mqa_rl.evaluation.answering_report import write_atomic
+
 
 def save_versioned(path: str | Path, fmt: str, version: int, blob: dict) -> Path:
     """``blob`` with ``format`` and ``version`` to ``path``, through a temporary file and a rename."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    torch.save({"format": fmt, "version": int(version), **blob}, tmp)
-    os.replace(tmp, path)
-    return path
+    buffer = io.BytesIO()
+    torch.save({"format": fmt, "version": int(version), **blob}, buffer)
+    return write_atomic(Path(path), buffer.getvalue())
 
 
 def load_versioned(path: str | Path, fmt: str, version: int, *, what: str, hint: str) -> dict:
