@@ -55,6 +55,7 @@ EPISODE = "episode"
 EPISODE_REWARD = (EPISODE, "reward")                   # float32 [1] sum of rewards so far
 EPISODE_TERMS = (EPISODE, "terms")                     # float32 [1] each: sums of the reward terms so far
 TARGET_CHI_START = (EPISODE, "target_chi_start")       # float32 [1] mean target χ at reset (0 without target)
+TARGETS_IN_VIEW_START = (EPISODE, "targets_in_view_start")  # bool [K] targets a counter sees at reset (≥ COUNTABLE_PX)
 
 # one answering episode (mqa_rl.collectors.rollouts): what the VQA reads and what the reports need,
 # stored per episode in a memmap TensorDict; FIRST / LAST hold the images I_start / I_stop

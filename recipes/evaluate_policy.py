@@ -49,7 +49,8 @@ ORACLES = {"oracle": {"kind": "privileged", "lookahead": 1},
            "image_teacher": {"kind": "privileged", "lookahead": 1, "order": "visible_first", "geometry": "visible"},
            "refined_teacher": {"kind": "privileged", "lookahead": 1, "order": "visible_first", "geometry": "visible",
                                "refine_radius": 1}}
-REPORTED = ("reward", "pushes", "final_simple", "chi_end", "chi_change", "hidden_end", "stopped")
+REPORTED = ("reward", "pushes", "final_simple", "chi_end", "chi_change", "hidden_end", "into_view", "out_of_view",
+            "stopped")
 
 
 def episodes_meta(cfg: DictConfig, dataset, level: str, qtypes, max_pushes: int, reward: dict,

@@ -26,6 +26,7 @@ from mqa_rl import keys
 from mqa_rl.data.dataset import LEVELS
 from mqa_rl.data.questions import QUESTION_TYPES
 from mqa_rl.evaluation.episode_metrics import mean_ci95
+from mqa_rl.transforms.episode_stats import COUNTABLE_PX
 
 
 def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float, float]:
@@ -91,7 +92,7 @@ def paired_difference(right_a: torch.Tensor, records_a: TensorDict, right_b: tor
     return mean_ci95(torch.tensor([a[q] - b[q] for q in common], dtype=torch.float64))
 
 
-def counter_right(records: TensorDict, answers, frame: str = keys.LAST, min_px: float = 20.0) -> torch.Tensor:
+def counter_right(records: TensorDict, answers, frame: str = keys.LAST, min_px: float = COUNTABLE_PX) -> torch.Tensor:
     """Bool [N]: a perfect counter of the targets with ≥ ``min_px`` visible pixels in ``frame`` is right
     (COUNTING records only; False elsewhere)."""
     visible = records.get((frame, keys.FRAME_VISIBLE))

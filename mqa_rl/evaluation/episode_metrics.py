@@ -8,6 +8,9 @@ Needs ``EpisodeStats`` in the env (``make_mqa_env(..., episode_stats=True)``). P
 * ``chi_start`` / ``chi_end``: mean χ of the targets in the first / last image; ``chi_change`` =
   end − start (negative: targets got uncovered)
 * ``hidden_end``: fraction of the targets fully hidden (χ = 1) in the last image
+* ``into_view`` / ``out_of_view``: fraction of the targets that crossed the counting line (``COUNTABLE_PX``
+  visible pixels) between the first and last image, upwards / downwards; ``in_view_change`` their
+  difference. This is what an answer can gain: χ falls also on targets a counter already sees.
 
 Target metrics are NaN for episodes whose question has no target in the bin (a COUNTING answer 0);
 ``summarise`` ignores NaN.
@@ -21,12 +24,12 @@ import torch
 from tensordict import TensorDictBase
 
 from mqa_rl import keys
-from mqa_rl.transforms.episode_stats import mean_target_chi
+from mqa_rl.transforms.episode_stats import mean_target_chi, targets_in_view
 from mqa_rl.transforms.functional import is_simple_scene
 
 FULLY_HIDDEN = 1.0 - 1e-6
-FINAL_KEYS = (keys.TARGET_MASK, keys.OVERLAP, keys.TARGET_CHI_START, keys.EPISODE_REWARD, keys.PUSH_COUNT,
-              keys.IS_STOP, keys.EPISODE_TERMS)
+FINAL_KEYS = (keys.TARGET_MASK, keys.OVERLAP, keys.VISIBLE_AREA, keys.TARGET_CHI_START, keys.TARGETS_IN_VIEW_START,
+              keys.EPISODE_REWARD, keys.PUSH_COUNT, keys.IS_STOP, keys.EPISODE_TERMS)
 
 
 def episode_metrics(final: TensorDictBase, simple_threshold: float = 0.2) -> dict[str, torch.Tensor]:
@@ -47,6 +50,13 @@ def episode_metrics(final: TensorDictBase, simple_threshold: float = 0.2) -> dic
         "chi_change": torch.where(has_target, chi_end - chi_start, nan),
         "hidden_end": torch.where(has_target, hidden.to(torch.float32), nan),
     }
+    start = final.get(keys.TARGETS_IN_VIEW_START, None)
+    if start is not None:
+        end, n = targets_in_view(final), tmask.sum(-1).clamp(min=1)
+        into, out_of = (end & ~start).sum(-1) / n, (start & ~end).sum(-1) / n
+        out["into_view"] = torch.where(has_target, into.to(torch.float32), nan)
+        out["out_of_view"] = torch.where(has_target, out_of.to(torch.float32), nan)
+        out["in_view_change"] = torch.where(has_target, (into - out_of).to(torch.float32), nan)
     terms = final.get(keys.EPISODE_TERMS, None)
     if terms is not None:
         for name in terms.keys():

@@ -1,5 +1,6 @@
 """Running episode statistics as observations, so that a collector's batch tells at every episode
-end what the episode earned: reward and reward-term sums, and the targets' mean overlap χ at reset.
+end what the episode earned: reward and reward-term sums, the targets' mean overlap χ at reset and
+which targets were in view then (what a counter could count on the first image).
 
 Put it after the reward stack. Sums run from the reset; the values at a step with ``done`` describe
 the finished episode (``mqa_rl.evaluation.episode_metrics`` turns them into metrics).
@@ -14,6 +15,10 @@ from torchrl.envs import Transform
 
 from mqa_rl import keys
 
+# A target counts as in view with at least this many visible pixels: the line of the answering
+# evaluation's perfect counter (mqa_rl.evaluation.answering.counter_right).
+COUNTABLE_PX = 20.0
+
 
 def mean_target_chi(td: TensorDictBase) -> torch.Tensor:
     """Mean χ of the question's targets, [..., 1]; 0 where there is no target."""
@@ -22,11 +27,17 @@ def mean_target_chi(td: TensorDictBase) -> torch.Tensor:
     return ((chi * t).sum(-1) / t.sum(-1).clamp(min=1)).unsqueeze(-1)
 
 
+def targets_in_view(td: TensorDictBase) -> torch.Tensor:
+    """bool [..., K]: the question's targets with at least ``COUNTABLE_PX`` visible pixels."""
+    return td.get(keys.TARGET_MASK) & (td.get(keys.VISIBLE_AREA) >= COUNTABLE_PX)
+
+
 class EpisodeStats(Transform):
     def __init__(self, terms: tuple[str, ...] = ()):
         self.terms = tuple(terms)
         self._term_keys = [(keys.REWARD_TERMS, t) for t in self.terms]
-        out = [keys.EPISODE_REWARD, keys.TARGET_CHI_START, *((*keys.EPISODE_TERMS, t) for t in self.terms)]
+        out = [keys.EPISODE_REWARD, keys.TARGET_CHI_START, keys.TARGETS_IN_VIEW_START,
+               *((*keys.EPISODE_TERMS, t) for t in self.terms)]
         super().__init__(in_keys=[keys.REWARD, *self._term_keys], out_keys=out)
 
     def _zeros(self, td: TensorDictBase) -> torch.Tensor:
@@ -37,6 +48,7 @@ class EpisodeStats(Transform):
         for t in self.terms:
             tensordict_reset.set((*keys.EPISODE_TERMS, t), self._zeros(tensordict_reset))
         tensordict_reset.set(keys.TARGET_CHI_START, mean_target_chi(tensordict_reset))
+        tensordict_reset.set(keys.TARGETS_IN_VIEW_START, targets_in_view(tensordict_reset))
         return tensordict_reset
 
     def _step(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> TensorDictBase:
@@ -45,11 +57,13 @@ class EpisodeStats(Transform):
             total = (*keys.EPISODE_TERMS, t)
             next_tensordict.set(total, tensordict.get(total) + next_tensordict.get(key))
         next_tensordict.set(keys.TARGET_CHI_START, tensordict.get(keys.TARGET_CHI_START))
+        next_tensordict.set(keys.TARGETS_IN_VIEW_START, tensordict.get(keys.TARGETS_IN_VIEW_START))
         return next_tensordict
 
     def transform_observation_spec(self, spec: Composite) -> Composite:
         scalar = Unbounded(shape=(*spec.shape, 1), dtype=torch.float32, device=spec.device)
         terms = Composite({t: scalar.clone() for t in self.terms}, shape=spec.shape, device=spec.device)
+        in_view = spec[keys.TARGET_MASK].clone()
         spec[keys.EPISODE] = Composite(reward=scalar.clone(), terms=terms, target_chi_start=scalar.clone(),
-                                       shape=spec.shape, device=spec.device)
+                                       targets_in_view_start=in_view, shape=spec.shape, device=spec.device)
         return spec

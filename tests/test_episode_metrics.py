@@ -1,0 +1,60 @@
+"""What an evaluation reports per episode: the targets' χ and the targets crossing the counting line."""
+
+import math
+from pathlib import Path
+
+import torch
+from omegaconf import OmegaConf
+from tensordict import TensorDict
+
+from mqa_rl import keys
+from mqa_rl.envs import actions
+from mqa_rl.envs.factory import make_mqa_env
+from mqa_rl.evaluation.episode_metrics import episode_metrics
+from mqa_rl.transforms.episode_stats import COUNTABLE_PX, targets_in_view
+
+REPO = Path(__file__).parents[1]
+
+
+def _final(target, visible_end, in_view_start, chi):
+    return TensorDict({
+        keys.TARGET_MASK: torch.tensor(target), keys.VISIBLE_AREA: torch.tensor(visible_end, dtype=torch.float32),
+        keys.OVERLAP: torch.tensor(chi), keys.TARGETS_IN_VIEW_START: torch.tensor(in_view_start),
+        keys.TARGET_CHI_START: torch.tensor([0.5]), keys.EPISODE_REWARD: torch.zeros(1),
+        keys.PUSH_COUNT: torch.tensor([3]), keys.IS_STOP: torch.tensor([True]),
+    }, batch_size=[]).unsqueeze(0)
+
+
+def test_targets_crossing_the_counting_line_are_counted_both_ways():
+    px = COUNTABLE_PX
+    # four targets: one comes into view, one goes out of it, one stays in view, one stays hidden; one non-target
+    final = _final(target=[True, True, True, True, False], visible_end=[px, px - 1, 500.0, 0.0, 900.0],
+                   in_view_start=[False, True, True, False, False], chi=[0.5, 0.9, 0.1, 1.0, 0.0])
+    m = episode_metrics(final)
+    assert m["into_view"].item() == 0.25 and m["out_of_view"].item() == 0.25 and m["in_view_change"].item() == 0.0
+    assert m["hidden_end"].item() == 0.25
+    none = _final(target=[False, False], visible_end=[0.0, 50.0], in_view_start=[False, False], chi=[1.0, 0.0])
+    assert math.isnan(episode_metrics(none)["into_view"].item())         # no target: nothing to count
+
+
+def test_the_env_records_which_targets_were_in_view_at_reset_and_keeps_it(small_dataset_dir):
+    reward = OmegaConf.to_container(OmegaConf.load(REPO / "recipes" / "conf" / "reward" / "global.yaml"))
+    env = make_mqa_env(small_dataset_dir, reward, episode_stats=True, split=None, seed=0, max_pushes=3)
+    try:
+        env.set_seed(3)
+        for _ in range(4):                         # until a question with a target, pushed at twice
+            td = env.reset()
+            if td.get(keys.TARGET_MASK).any():
+                break
+        assert td.get(keys.TARGET_MASK).any()
+        start = targets_in_view(td)
+        assert start.any()                         # a target a counter sees (the small scenes are sparse)
+        assert torch.equal(td.get(keys.TARGETS_IN_VIEW_START), start)
+        mask = td.get(keys.ACTION_MASK)
+        push = int(torch.nonzero(mask[: actions.STOP]).flatten()[0])
+        for _ in range(2):
+            td = env.step(td.set(keys.ACTION, torch.tensor(push)))["next"]
+            assert torch.equal(td.get(keys.TARGETS_IN_VIEW_START), start)
+        assert env.observation_spec[keys.TARGETS_IN_VIEW_START].is_in(td.get(keys.TARGETS_IN_VIEW_START))
+    finally:
+        env.close()
