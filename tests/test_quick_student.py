@@ -1,0 +1,32 @@
+"""The 30-minute student (profile=cpu_quick_student, tools/train_student.sh) starts from the shipped
+recognition file: the profile must build a network that file fits, frozen, with the budget it promises."""
+
+from pathlib import Path
+
+import torch
+
+from conftest import compose_recipe_config
+from mqa_rl.data.objects import CLASS_NAMES
+from mqa_rl.modules.pretrained_recognition import load_recognition
+from mqa_rl.modules.push_policy import make_push_qnet
+from mqa_rl.sim.geometry import CAMERA_DISTANCE
+
+REPO = Path(__file__).parents[1]
+
+
+def test_the_quick_student_profile_loads_the_shipped_recognition_frozen():
+    cfg = compose_recipe_config("train_dqn", ["profile=cpu_quick_student"])
+    assert cfg.demos.pretrain_updates == 2500 and cfg.collector.total_frames == 8
+    assert cfg.model.geometric_push and cfg.model.rotated_head and cfg.model.class_map
+    recognition = REPO / cfg.model.pretrained
+    assert recognition.is_file(), f"{recognition} must ship with the repository"
+    vocab = torch.load(recognition, map_location="cpu", weights_only=False)["question"]["embedding.weight"].shape[0]
+    net = make_push_qnet(cfg.model, vocab_size=vocab, camera_distance=CAMERA_DISTANCE, num_classes=len(CLASS_NAMES))
+    before = {k: v.clone() for k, v in net.rgb_trunk.state_dict().items()}
+    meta = load_recognition(net, recognition, CLASS_NAMES, freeze=cfg.model.pretrained_frozen)
+    assert "dataset_sha256" in meta
+    assert any(not torch.equal(before[k], v) for k, v in net.rgb_trunk.state_dict().items())
+    assert not any(p.requires_grad for p in net.rgb_trunk.parameters())
+    assert not any(p.requires_grad for p in net.class_head.parameters())
+    assert all(p.requires_grad for p in net.question.parameters())
+

@@ -1,0 +1,51 @@
+#!/usr/bin/env bash
+# The learned push policy end to end on 2 CPU cores (~30 min; README "Twelfth attempt"):
+#   1. the refined teacher's demonstrations on the train split, two processes at once (2 x 600 states)
+#   2. the geometric student imitating them (profile=cpu_quick_student: 2,500 updates, the shipped recognition)
+#   3. its stop, learnt from its own never-stopping episodes on the train split (recipes/fit_stop.py)
+#   4. with MQA_EVAL=<episodes per level>: greedy + learned stop vs random on the test split
+#      (MQA_BASELINE=<an earlier evaluation's out_dir>: reuse its random episodes when they are the same questions)
+#
+#   bash tools/train_student.sh [ROOT] [SEED] [train_dqn overrides ...]     # ROOT defaults to runs/student
+#
+# Every step is skipped when its output exists and resumes when it was interrupted, so running the same
+# command again continues. Evaluate later with
+#   python recipes/evaluate_policy.py run=ROOT/dqn stop_critic=ROOT/stop episodes_per_level=300
+set -euo pipefail
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
+. tools/bootstrap.sh
+ROOT=${1:-runs/student}
+SEED=${2:-0}
+shift $(( $# < 2 ? $# : 2 ))
+start=$SECONDS
+step() { echo "=== [$(( (SECONDS - start) / 60 )) min $(( (SECONDS - start) % 60 )) s] $*"; }
+[ -d data/mqa ] || { step "the dataset (python recipes/make_dataset.py)"; python recipes/make_dataset.py; }
+
+step "demonstrations of the refined teacher: 2 x ${MQA_DEMO_STATES:-600} states, two processes -> $ROOT/demos_{0,1}"
+pids=()
+for k in 0 1; do
+  if [ ! -f "$ROOT/demos_$k/demos.json" ]; then
+    python recipes/collect_demonstrations.py "states=${MQA_DEMO_STATES:-600}" "seed=$(( 2 * SEED + k + 100 ))" \
+      oracle.order=visible_first oracle.geometry=visible oracle.refine_radius=1 progress=false \
+      "out_dir=$ROOT/demos_$k" &
+    pids+=($!)
+  fi
+done
+for p in "${pids[@]}"; do wait "$p"; done
+
+step "the geometric student: imitation updates -> $ROOT/dqn"
+python recipes/train_dqn.py dataset=data/mqa reward=global profile=cpu_quick_student \
+  "demos.path=[$ROOT/demos_0,$ROOT/demos_1]" "seed=$SEED" "out_dir=$ROOT/dqn" resume=true "$@"
+
+if [ ! -f "$ROOT/stop/stop_critic.pt" ]; then
+  step "its stop, from its own pushes on the train split -> $ROOT/stop"
+  python recipes/fit_stop.py "run=$ROOT/dqn" episodes_per_level=100 "out_dir=$ROOT/stop"
+fi
+step "trained: $ROOT/dqn with $ROOT/stop"
+
+if [ -n "${MQA_EVAL:-}" ]; then
+  step "test split: greedy + learned stop vs random, $MQA_EVAL episodes per level -> $ROOT/eval"
+  python recipes/evaluate_policy.py "run=$ROOT/dqn" "stop_critic=$ROOT/stop" "episodes_per_level=$MQA_EVAL" \
+    'policies=[greedy,random]' video_episodes=0 "out_dir=$ROOT/eval" ${MQA_BASELINE:+"baseline_from=$MQA_BASELINE"}
+fi
+step "done"
