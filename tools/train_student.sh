@@ -8,8 +8,9 @@
 #
 #   bash tools/train_student.sh [ROOT] [SEED] [train_dqn overrides ...]     # ROOT defaults to runs/student
 #
-# Every step is skipped when its output exists and resumes when it was interrupted, so running the same
-# command again continues. Evaluate later with
+# Running the same command again skips every finished step; an interrupted training or stop fit resumes
+# (train_dqn.py resume=true, fit_stop.py's per-level cache), an interrupted demonstration set is collected
+# again (it is written only when complete). Evaluate later with
 #   python recipes/evaluate_policy.py run=ROOT/dqn stop_critic=ROOT/stop episodes_per_level=300
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."

@@ -50,13 +50,11 @@ def episode_metrics(final: TensorDictBase, simple_threshold: float = 0.2) -> dic
         "chi_change": torch.where(has_target, chi_end - chi_start, nan),
         "hidden_end": torch.where(has_target, hidden.to(torch.float32), nan),
     }
-    start = final.get(keys.TARGETS_IN_VIEW_START, None)
-    if start is not None:
-        end, n = targets_in_view(final), tmask.sum(-1).clamp(min=1)
-        into, out_of = (end & ~start).sum(-1) / n, (start & ~end).sum(-1) / n
-        out["into_view"] = torch.where(has_target, into.to(torch.float32), nan)
-        out["out_of_view"] = torch.where(has_target, out_of.to(torch.float32), nan)
-        out["in_view_change"] = torch.where(has_target, (into - out_of).to(torch.float32), nan)
+    start, end, n = final.get(keys.TARGETS_IN_VIEW_START), targets_in_view(final), tmask.sum(-1).clamp(min=1)
+    into, out_of = (end & ~start).sum(-1) / n, (start & ~end).sum(-1) / n
+    out["into_view"] = torch.where(has_target, into.to(torch.float32), nan)
+    out["out_of_view"] = torch.where(has_target, out_of.to(torch.float32), nan)
+    out["in_view_change"] = torch.where(has_target, (into - out_of).to(torch.float32), nan)
     terms = final.get(keys.EPISODE_TERMS, None)
     if terms is not None:
         for name in terms.keys():
