@@ -39,6 +39,7 @@ from mqa_rl.modules.frozen_policies import PushBudget, StopMargin, make_frozen_p
 from mqa_rl.modules.learned_stop import LearnedStop
 from mqa_rl.modules.random_policy import RandomMQAPolicy
 from mqa_rl.modules.trained_policy import load_greedy
+from mqa_rl.transforms.push_memory import memory_radius
 
 # References that read the simulator (never a learned policy), as frozen-policy specs: the least-visible-first
 # oracle, the teacher of profile=cpu_visible_teacher (only targets the image shows a part of), the
@@ -97,8 +98,7 @@ def main(cfg: DictConfig) -> None:
     max_pushes = int(run_cfg.env.max_pushes) if run_cfg else 10
     qtypes = cfg.question_types or (list(run_cfg.env.question_types) if run_cfg else None)
     threshold = float(reward.get("simple_threshold", 0.2))
-    push_memory = cfg.push_memory if cfg.push_memory is not None else (run_cfg.env.get("push_memory") if run_cfg else None)
-    push_memory = None if push_memory is None or int(push_memory) < 0 else int(push_memory)
+    push_memory = memory_radius(cfg.push_memory, run_cfg.env if run_cfg else None)
     write_atomic(out / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))   # what these figures were measured with
     results, lines = {}, []
     for level in cfg.difficulties:
@@ -115,7 +115,7 @@ def main(cfg: DictConfig) -> None:
                 if cfg.stop_margin is not None:
                     policy = StopMargin(policy, float(cfg.stop_margin))
                 if cfg.stop_critic is not None:
-                    policy = LearnedStop.from_file(policy, cfg.stop_critic, max_pushes)
+                    policy = LearnedStop.from_file(policy, cfg.stop_critic, max_pushes, push_memory)
                 if cfg.budget is not None:
                     policy = PushBudget(policy, int(cfg.budget))
 

@@ -32,6 +32,7 @@ from mqa_rl.modules.learned_stop import FEATURES, policy_fingerprint, policy_net
 from mqa_rl.modules.trained_policy import load_greedy
 from mqa_rl.training.optimal_stopping import fit_stop_critic, fixed_rules, stopped_chi
 from mqa_rl.transforms.episode_stats import mean_target_chi
+from mqa_rl.transforms.push_memory import memory_radius
 
 
 def collect_level(env, policy, net, episodes: int, max_pushes: int) -> dict:
@@ -85,8 +86,7 @@ def main(cfg: DictConfig) -> None:
     run_cfg = OmegaConf.load(run / "config.yaml")
     dataset = str(cfg.dataset or run_cfg.dataset)
     max_pushes = int(run_cfg.env.max_pushes)
-    push_memory = run_cfg.env.get("push_memory")
-    push_memory = None if push_memory is None or int(push_memory) < 0 else int(push_memory)
+    push_memory = memory_radius(cfg.push_memory, run_cfg.env)
     torch.set_num_threads(int(cfg.threads))
     write_atomic(out / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))
     levels, started = {}, time.time()
@@ -136,7 +136,7 @@ def main(cfg: DictConfig) -> None:
     report["final"] = {"history": history, **{lv: score(critic, data, level_of == i) for i, lv in enumerate(levels)}}
     report["collect_and_fit_s"] = round(time.time() - started, 1)
     meta = {"policy_fingerprint": policy_fingerprint(net), "run": str(run), "checkpoint": Path(checkpoint).name,
-            "split": cfg.split, "episodes": int(data["chi"].shape[0]), "fit": fit_options}
+            "split": cfg.split, "episodes": int(data["chi"].shape[0]), "fit": fit_options, "push_memory": push_memory}
     critic.save(out / "stop_critic.pt", meta)
     write_atomic(out / "report.json", json.dumps(report, indent=2))
     rules = ("after_0", "after_1", "after_3", f"after_{max_pushes}", "hindsight")

@@ -1,6 +1,7 @@
 """The learned stop: optimal stopping by regression on a policy's own paths, its features, the stop
 rule on a real Q-network actor, and its file."""
 
+import warnings
 from pathlib import Path
 
 import pytest
@@ -139,6 +140,20 @@ def test_the_critic_file_round_trips_and_bad_files_are_refused(tmp_path):
     with pytest.raises(ValueError, match="not a stop-critic file"):
         StopCritic.load(tmp_path / "foreign.pt")
     assert not list((tmp_path / "stop").glob(".*tmp*"))                # nothing half-written left behind
+
+
+def test_a_critic_fitted_under_another_push_memory_warns(tmp_path):
+    """The critic predicts what the policy's next pushes gain; with another memory it makes other pushes."""
+    actor, net = _actor()
+    path = _constant_critic(-0.2).save(tmp_path / "stop_critic.pt",
+                                       {"policy_fingerprint": policy_fingerprint(net), "push_memory": 1})
+    with pytest.warns(UserWarning, match="push_memory=1 and runs with push_memory=None"):
+        LearnedStop.from_file(actor, path, 10)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        LearnedStop.from_file(actor, path, 10, push_memory=1)
+        old = _constant_critic(-0.2).save(tmp_path / "old.pt", {"policy_fingerprint": policy_fingerprint(net)})
+        LearnedStop.from_file(actor, old, 10, push_memory=1)     # written before the fit recorded its memory
 
 
 def test_the_shipped_critic_loads_and_names_its_policy():

@@ -2,13 +2,23 @@
 
 import pytest
 import torch
+from omegaconf import OmegaConf
 from torchrl.envs.utils import check_env_specs
 
 from mqa_rl import keys
 from mqa_rl.envs import actions
 from mqa_rl.envs.factory import make_mqa_env
-from mqa_rl.transforms.push_memory import PushMemory
+from mqa_rl.transforms.push_memory import PushMemory, memory_radius
 from torch_threads import one_torch_thread  # noqa: F401  (autouse)
+
+
+def test_a_recipes_push_memory_overrides_the_runs_and_negative_means_none():
+    run_env = OmegaConf.create({"push_memory": 2})
+    assert memory_radius(None, run_env) == 2                      # the run's
+    assert memory_radius(1, run_env) == 1 and memory_radius(0, run_env) == 0
+    assert memory_radius(-1, run_env) is None                     # -1: switched off
+    assert memory_radius(None, OmegaConf.create({"push_memory": None})) is None
+    assert memory_radius(None, OmegaConf.create({})) is None and memory_radius(None, None) is None
 
 
 def test_neighbourhood_marks_the_push_and_same_direction_starts_around_it():

@@ -3,7 +3,7 @@ lowers the targets' hidden fraction χ.
 
 Why: the imitation students' push branch carries to new scenes, their stop branch does not: it learnt
 "easy-looking scene -> stop" from a teacher whose pushes are better than theirs (97 % of easy
-episodes stop at once), while the same student pushing ten times keeps uncovering (README, tenth and
+episodes stop at once), while the same student pushing ten times keeps uncovering (docs/policy_attempts.md, tenth and
 eleventh attempts). When to stop is an optimal-stopping problem over the policy's *own* pushes:
 stopping at step t leaves χ_t, pushing on leaves whatever a later stop gives. ``StopCritic`` predicts
 that change of χ from what the policy sees (``stop_features``); it is fitted by
@@ -17,6 +17,7 @@ for other weights is refused.
 from __future__ import annotations
 
 import hashlib
+import warnings
 from pathlib import Path
 
 import torch
@@ -139,8 +140,13 @@ class LearnedStop(TensorDictModuleBase):
         self.out_keys = list(getattr(policy, "out_keys", [keys.ACTION]))
 
     @classmethod
-    def from_file(cls, policy, path: str | Path, max_pushes: int) -> "LearnedStop":
+    def from_file(cls, policy, path: str | Path, max_pushes: int, push_memory: int | None = None) -> "LearnedStop":
+        """``push_memory``: the memory the env runs with; a critic fitted under another one predicts for pushes
+        the policy will not make (a warning; files written before the fit recorded it are not checked)."""
         critic, meta = StopCritic.load(path)
+        if "push_memory" in meta and meta["push_memory"] != push_memory:
+            warnings.warn(f"{path}: this stop critic was fitted with push_memory={meta['push_memory']} and runs with "
+                          f"push_memory={push_memory}; refit it with recipes/fit_stop.py push_memory=<the same>", stacklevel=2)
         return cls(policy, critic, max_pushes, fingerprint=meta.get("policy_fingerprint"))
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:

@@ -26,6 +26,13 @@ from mqa_rl import keys
 from mqa_rl.envs import actions
 
 
+def memory_radius(override, run_env) -> int | None:
+    """The push memory an evaluation or stop fit runs with: ``override`` (a recipe's ``push_memory``) unless
+    None, else the run's ``env.push_memory``; None or a negative radius: no memory."""
+    radius = override if override is not None else (run_env.get("push_memory") if run_env is not None else None)
+    return None if radius is None or int(radius) < 0 else int(radius)
+
+
 class PushMemory(Transform):
     def __init__(self, radius: int = 1):
         if radius < 0:
