@@ -17,6 +17,7 @@ REPO = Path(__file__).parents[1]
 def test_the_quick_student_profile_loads_the_shipped_recognition_frozen():
     cfg = compose_recipe_config("train_dqn", ["profile=cpu_quick_student"])
     assert cfg.demos.pretrain_updates == 2500 and cfg.collector.total_frames == 8
+    assert cfg.env.push_memory == 1            # the stop fit and the test run the policy with the memory
     assert cfg.model.geometric_push and cfg.model.rotated_head and cfg.model.class_map
     recognition = REPO / cfg.model.pretrained
     assert recognition.is_file(), f"{recognition} must ship with the repository"
