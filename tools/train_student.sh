@@ -4,6 +4,7 @@
 #   2. the geometric student imitating them (profile=cpu_quick_student: 2,500 updates, the shipped recognition)
 #   3. its stop, learnt from its own never-stopping episodes on the train split (recipes/fit_stop.py)
 #   4. with MQA_EVAL=<episodes per level>: greedy + learned stop vs random on the test split
+#   Steps 3 and 4 run the policy with the profile's push memory (env.push_memory=1: no push twice in an episode).
 #      (MQA_BASELINE=<an earlier evaluation's out_dir>: reuse its random episodes when they are the same questions)
 #
 #   bash tools/train_student.sh [ROOT] [SEED] [train_dqn overrides ...]     # ROOT defaults to runs/student
