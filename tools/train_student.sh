@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The learned push policy end to end on 2 CPU cores (21-23 min measured four times; docs/policy_attempts.md, "Twelfth attempt"):
+# The learned push policy end to end on 2 CPU cores (22-24 min measured five times; docs/policy_attempts.md, "Twelfth attempt"):
 #   1. the refined teacher's demonstrations on the train split, two processes at once (2 x 600 states)
 #   2. the geometric student imitating them (profile=cpu_quick_student: 2,500 updates, the shipped recognition)
 #   3. its stop, learnt from its own never-stopping episodes on the train split (recipes/fit_stop.py)
