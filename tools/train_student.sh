@@ -1,11 +1,11 @@
 #!/usr/bin/env bash
-# The learned push policy end to end on 2 CPU cores (22-24 min measured five times; docs/policy_attempts.md, "Twelfth attempt"):
+# The learned push policy end to end on 2 CPU cores (22-24 min measured five times; docs/policy_attempts.md, "Twelfth" and "Thirteenth attempt"):
 #   1. the refined teacher's demonstrations on the train split, two processes at once (2 x 600 states)
 #   2. the geometric student imitating them (profile=cpu_quick_student: 2,500 updates, the shipped recognition)
 #   3. its stop, learnt from its own never-stopping episodes on the train split (recipes/fit_stop.py)
 #   4. with MQA_EVAL=<episodes per level>: greedy + learned stop vs random on the test split
-#   Steps 3 and 4 run the policy with the profile's push memory (env.push_memory=1: no push twice in an episode).
 #      (MQA_BASELINE=<an earlier evaluation's out_dir>: reuse its random episodes when they are the same questions)
+#   Steps 3 and 4 run the policy with the profile's push memory (env.push_memory=1: no push twice in an episode).
 #
 #   bash tools/train_student.sh [ROOT] [SEED] [train_dqn overrides ...]     # ROOT defaults to runs/student
 #
