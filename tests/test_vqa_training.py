@@ -209,3 +209,39 @@ def test_density_targets_spread_by_a_gaussian_keep_their_mass(small_dataset):
     assert float(spread[0, 3, 12, 13]) == pytest.approx(float(spread[0, 3, 13, 12]))   # isotropic
     plain = EncoderPretrainLoss(FrameEncoder(num_classes=k), PretrainHeads(32, k), camera_distance=2.0)
     assert torch.equal(plain.blur(delta), delta)
+
+
+def test_pretraining_frames_mix_stores_of_another_dataset_of_the_same_objects(small_dataset, answering_root,
+                                                                              sparse_dataset, tmp_path):
+    """More scenes to learn to see from: a store collected on another dataset (same object library) is read
+    with its own scenes, its scene ids kept apart; a store whose dataset is gone is refused, saying why."""
+    import json
+    import shutil
+
+    from mqa_rl.training.vqa_data import SCENE_OFFSET
+
+    root, _ = answering_root
+    main_store = root / "rollouts" / "counting" / "no_manipulation" / "train"
+    other = tmp_path / "other"
+    collect = load_recipe("collect_rollouts")
+    collect.collect(compose_recipe_config("collect_rollouts", [
+        f"root={other}", f"dataset={sparse_dataset.root}", "system=no_manipulation", "splits=[train]",
+        "questions.max_per_group.train=1", "collection.workers=1", "progress=false"]))
+    other_store = other / "rollouts" / "counting" / "no_manipulation" / "train"
+    frames = pretraining_frames([main_store, other_store], small_dataset)
+    scenes = frames[keys.SCENE]
+    extra = frames[scenes >= SCENE_OFFSET]
+    assert len(extra) == 1 and len(frames) == len(pretraining_frames([main_store], small_dataset)) + 1
+    objects = sparse_dataset.scenes[int(extra[keys.SCENE][0]) - SCENE_OFFSET].objects
+    object_map, class_map = extra[keys.OBJECT_MAP][0], extra[keys.CLASS_MAP][0]
+    for slot in object_map.unique().tolist():                 # labelled with the other dataset's objects
+        if slot:
+            label = int(class_map[object_map == slot][0])
+            assert small_dataset.classes[label - 1] == objects[slot - 1].class_name
+    moved = tmp_path / "moved"
+    shutil.copytree(other_store, moved)
+    meta = json.loads((moved / "meta.json").read_text())
+    meta["dataset"]["manifest_sha256"] = "0" * 64
+    (moved / "meta.json").write_text(json.dumps(meta))
+    with pytest.raises(ValueError, match="make it again"):
+        pretraining_frames([main_store, moved], small_dataset)

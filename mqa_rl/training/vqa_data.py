@@ -23,6 +23,8 @@ from tensordict import TensorDict
 
 from mqa_rl import keys
 from mqa_rl.collectors.store import chunk_paths, load_records, read_meta
+from mqa_rl.data import MQADataset
+from mqa_rl.data.dataset import dataset_fingerprint
 
 RECORD_KEYS = (keys.QUESTION, keys.ANSWER_LABEL, keys.TYPE_LABEL, keys.LEVEL, keys.SCENE, keys.QUESTION_ID,
                keys.PUSHES, keys.STOPPED, keys.CHI_START, keys.CHI_END)
@@ -128,45 +130,70 @@ class Batches:
             yield self.take(torch.arange(start, min(start + batch_size, len(self))))
 
 
+SCENE_OFFSET = 1_000_000      # pretraining frames of a store on another dataset: scene ids + k · SCENE_OFFSET
+
+
+def store_dataset(store: str | Path, dataset):
+    """The ``MQADataset`` a rollout store was collected on: ``dataset`` itself, or the one its meta names
+    (checked by fingerprint, and it must have ``dataset``'s classes: the class labels index them)."""
+    info = read_meta(store).get("dataset", {})
+    if info.get("manifest_sha256") in (None, dataset_fingerprint(dataset.root)):
+        return dataset
+    root = Path(info.get("root", ""))
+    if not (root / "manifest.json").is_file() or dataset_fingerprint(root) != info["manifest_sha256"]:
+        raise ValueError(f"{store} was collected on the dataset {info.get('root')!r}, which is not there (or has "
+                         f"changed since): make it again with the same make_dataset.py command, or drop that store")
+    other = MQADataset(root)
+    if list(other.classes) != list(dataset.classes):
+        raise ValueError(f"{store} was collected on {root}, whose classes differ from {dataset.root}'s: its class "
+                         f"labels would mean other objects; pretrain on stores of datasets with the same object library")
+    return other
+
+
 def pretraining_frames(stores, dataset, *, max_frames: int | None = None, seed: int = 0) -> TensorDict:
     """Frames [N] (``RGB``, ``DEPTH``, ``OBJECT_MAP``, ``CLASS_MAP``, ``SCENE``, ``LEVEL``) for pretraining the
-    encoder, from rollout stores collected with depth and object maps (``dataset``: the ``MQADataset`` they
-    were collected on, for the objects' classes): each scene's first image once (it is the same for
-    every question of the scene) and every last image after at least one push; at most ``max_frames``
-    of them, drawn with ``seed``."""
+    encoder, from rollout stores collected with depth and object maps: each scene's first image once (it
+    is the same for every question of the scene) and every last image after at least one push; at most
+    ``max_frames`` of them, drawn with ``seed``. ``dataset`` is the ``MQADataset`` the VQA answers on
+    (its classes label the frames); a store collected on another dataset of the same objects (more
+    scenes to learn to see from: ``make_dataset.py dataset.seed=1 dataset.out_dir=...``) is read with
+    that one, its scene ids offset by ``SCENE_OFFSET`` per extra dataset so that scenes stay distinct."""
     wanted = (keys.RGB, keys.DEPTH, keys.OBJECT_MAP)
-    picks = []                                       # (chunk path, frame, row, scene, level)
+    picks = []                                       # (chunk path, frame, row, scene, level, dataset)
     seen_scenes = set()
+    offsets = {dataset_fingerprint(dataset.root): 0}
     for store in stores:
         meta = read_meta(store)
         if not (meta.get("stored", {}).get("depth") and meta.get("stored", {}).get("object_map")):
             raise ValueError(f"{store} was collected without depth or object maps (collection.store_depth / "
                              f"store_object_map false): pretraining needs both")
+        ds = store_dataset(store, dataset)
+        offset = offsets.setdefault(dataset_fingerprint(ds.root), len(offsets) * SCENE_OFFSET)
         for path in chunk_paths(store):
             chunk = TensorDict.load_memmap(path)
             scenes, levels = chunk.get(keys.SCENE).tolist(), chunk.get(keys.LEVEL).tolist()
             for row, (scene, level, n) in enumerate(zip(scenes, levels, chunk.get(keys.PUSHES).tolist())):
-                if scene not in seen_scenes:
-                    seen_scenes.add(scene)
-                    picks.append((path, keys.FIRST, row, scene, level))
+                if (offset, scene) not in seen_scenes:
+                    seen_scenes.add((offset, scene))
+                    picks.append((path, keys.FIRST, row, scene, level, ds, offset))
                 if n > 0:
-                    picks.append((path, keys.LAST, row, scene, level))
+                    picks.append((path, keys.LAST, row, scene, level, ds, offset))
     if not picks:
         raise ValueError(f"no frames in {list(stores)}: collect rollouts first (recipes/collect_rollouts.py)")
     if max_frames is not None and len(picks) > max_frames:
         keep = np.random.default_rng(seed).choice(len(picks), size=max_frames, replace=False)
         picks = [picks[i] for i in sorted(keep)]
     frames, cache = [], {}
-    for path, which, row, scene, level in picks:
+    for path, which, row, scene, level, ds, offset in picks:
         if path not in cache:
             cache.clear()
             cache[path] = TensorDict.load_memmap(path)
         frame = cache[path].get(which)[row].select(*wanted).clone()
-        objects = dataset.scenes[scene].objects
+        objects = ds.scenes[scene].objects
         lut = torch.zeros(256, dtype=torch.uint8)
-        lut[1:len(objects) + 1] = torch.tensor([1 + dataset.classes.index(o.class_name) for o in objects], dtype=torch.uint8)
+        lut[1:len(objects) + 1] = torch.tensor([1 + ds.classes.index(o.class_name) for o in objects], dtype=torch.uint8)
         frame.set(keys.CLASS_MAP, lut[frame.get(keys.OBJECT_MAP).long()])
-        frame.set(keys.SCENE, torch.tensor(scene))
+        frame.set(keys.SCENE, torch.tensor(offset + scene))
         frame.set(keys.LEVEL, torch.tensor(level))
         frames.append(frame)
     return torch.stack(frames)
