@@ -89,3 +89,5 @@ FIRST_FEATURES = (FIRST, "features")          # float [C, h, w] VQAModel.encode_
 LAST_FEATURES = (LAST, "features")
 ANSWER_LOGITS = "answer_logits"               # float32 [n_answers]
 FRAME_ATTENTION = "frame_attention"           # float32 [2] attention over (I_start, I_stop), sums to 1
+QUESTION_CLASSES = "question_classes"         # int64 [2] the classes a question names, 1 + index into MQADataset.classes (the encoder's class channels); -1 where it names fewer
+GROUNDING_LOGITS = "grounding_logits"         # float32 [heads, 1 + classes] the classes pool's choice of class per head (VQAModel.grounding_logits)

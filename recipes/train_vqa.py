@@ -37,12 +37,13 @@ from mqa_rl.data import MQADataset  # noqa: E402
 from mqa_rl.data.dataset import LEVELS  # noqa: E402
 from mqa_rl.evaluation.answering_report import write_atomic  # noqa: E402
 from mqa_rl.losses.vqa import VQALoss  # noqa: E402
-from mqa_rl.modules.vqa import CHECKPOINT_NAME, VQAModel, save_vqa, vqa_module  # noqa: E402
+from mqa_rl.modules.vqa import CHECKPOINT_NAME, VQAModel, grounding_module, save_vqa, vqa_module  # noqa: E402
 from mqa_rl.modules.vqa_encoder import load_encoder  # noqa: E402
 from mqa_rl.training.model_checkpoint import ModelCheckpoint  # noqa: E402
 from mqa_rl.training.run_logger import RunLogger, trim_scalars  # noqa: E402
 from mqa_rl.training.signals import exit_on_sigterm  # noqa: E402
-from mqa_rl.training.vqa_data import DIHEDRAL, Batches, encode_store, load_answering_records, scene_split  # noqa: E402
+from mqa_rl.training.vqa_data import (DIHEDRAL, Batches, encode_store, load_answering_records,  # noqa: E402
+                                      question_class_labels, scene_split)
 
 MODEL_OPTIONS = ("pool", "image_size", "dim", "lstm_layers", "dropout", "cell_heads")
 
@@ -51,6 +52,8 @@ def check_config(cfg: DictConfig) -> None:
     t = cfg.train
     if t.steps <= 0 or t.batch_size <= 0 or t.eval_interval <= 0 or cfg.checkpoint.interval_steps <= 0:
         raise ValueError("train.steps, train.batch_size, train.eval_interval and checkpoint.interval_steps must be positive")
+    if not t.grounding_weight >= 0.0:
+        raise ValueError(f"train.grounding_weight={t.grounding_weight} must be ≥ 0 (0: the question's classes learnt from answers only)")
     if not 0.0 <= t.val_fraction < 1.0:
         raise ValueError(f"train.val_fraction={t.val_fraction} must lie in [0, 1)")
     if not Path(cfg.dataset).exists():
@@ -120,7 +123,9 @@ def train(cfg: DictConfig) -> dict:
     model.to(device)
 
     frozen = bool(cfg.encoder.freeze)
-    loss = VQALoss(vqa_module(model, from_features=frozen), label_smoothing=cfg.train.label_smoothing)
+    grounding = grounding_module(model) if model.grounds_classes and cfg.train.grounding_weight > 0 else None
+    loss = VQALoss(vqa_module(model, from_features=frozen), label_smoothing=cfg.train.label_smoothing,
+                   grounding=grounding, grounding_weight=cfg.train.grounding_weight)
     params = [p for p in model.parameters() if p.requires_grad]
     optim = torch.optim.Adam(params, lr=cfg.train.lr, weight_decay=cfg.train.weight_decay)
     state = {"step": 0, "best_val": -1.0, "best_step": -1, "train_seconds": 0.0}
@@ -152,6 +157,7 @@ def train(cfg: DictConfig) -> dict:
     else:
         records = load_answering_records(cfg.rollouts, images=True)
     feature_seconds = time.perf_counter() - t0
+    records.set(keys.QUESTION_CLASSES, question_class_labels(records, ds))
     val_mask = scene_split(records, cfg.train.val_fraction, cfg.seed)
     train_set = Batches(records[~val_mask], cfg.train.batch_size, augment=bool(cfg.train.augment))
     val_set = Batches(records[val_mask], cfg.train.batch_size, augment=False) if val_mask.any() else None
@@ -171,26 +177,30 @@ def train(cfg: DictConfig) -> dict:
                 "train_episodes": len(train_set), "val_episodes": int(val_mask.sum())}
 
     bar = tqdm(total=steps, initial=state["step"], unit="step", dynamic_ncols=True, disable=not cfg.logger.progress)
-    window_loss, window_acc, t_start = [], [], time.perf_counter()
+    window_loss, window_acc, window_ground, t_start = [], [], [], time.perf_counter()
     try:
         while state["step"] < steps:
             t_step = time.perf_counter()
             batch = train_set.sample().to(device)
             td = loss(batch)
             optim.zero_grad()
-            td["loss_vqa"].backward()
+            sum(v for k, v in td.items() if k.startswith("loss_")).backward()
             torch.nn.utils.clip_grad_norm_(params, cfg.train.max_grad_norm)
             optim.step()
             state["step"] += 1
             state["train_seconds"] += time.perf_counter() - t_step
             window_loss.append(td["loss_vqa"].item())
             window_acc.append(td["accuracy"].item())
+            if grounding is not None:
+                window_ground.append(td["grounding_accuracy"].item())
             bar.update(1)
             step = state["step"]
             if step % cfg.train.eval_interval == 0 or step == steps:
                 metrics = {"train/loss": float(np.mean(window_loss)), "train/accuracy": float(np.mean(window_acc)),
                            "time/steps_per_s": len(window_loss) / max(time.perf_counter() - t_start, 1e-9)}
-                window_loss, window_acc, t_start = [], [], time.perf_counter()
+                if window_ground:
+                    metrics["train/grounding_accuracy"] = float(np.mean(window_ground))
+                window_loss, window_acc, window_ground, t_start = [], [], [], time.perf_counter()
                 if val_set is not None:
                     metrics.update(validate(loss, val_set, device, 4 * cfg.train.batch_size))
                     if metrics["val/accuracy"] > state["best_val"]:

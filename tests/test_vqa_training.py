@@ -245,3 +245,58 @@ def test_pretraining_frames_mix_stores_of_another_dataset_of_the_same_objects(sm
     (moved / "meta.json").write_text(json.dumps(meta))
     with pytest.raises(ValueError, match="make it again"):
         pretraining_frames([main_store, moved], small_dataset)
+
+
+def test_grounding_loss_teaches_the_classes_pool_which_class_a_question_names(small_dataset, answering_root, tmp_path):
+    """Learnt from answers alone the classes pool's choice stayed near uniform; the grounding loss
+    supervises it with the classes the question names (head h <-> the h-th class; -1 = none)."""
+    from mqa_rl.modules.vqa import grounding_module
+    from mqa_rl.training.vqa_data import load_answering_records, question_class_labels
+
+    root, _ = answering_root
+    records = load_answering_records(root / "rollouts" / "counting" / "random" / "train", images=False)
+    labels = question_class_labels(records, small_dataset)
+    for row, q in zip(labels.tolist(), records[keys.QUESTION_ID].tolist()):     # COUNTING: one class, then none
+        assert small_dataset.classes[row[0] - 1] == small_dataset.questions[q].classes[0] and row[1] == -1
+    torch.manual_seed(0)
+    k = 1 + len(small_dataset.classes)
+    questions = [q for q in small_dataset.questions if q.type == "counting"][:40]
+    model = VQAModel(small_dataset.vocab.itos, small_dataset.answers, pool="classes", dropout=0.0, encoder_classes=k)
+    n = len(questions)
+    maps = torch.randn(n, 2 * k, 24, 24)
+    batch = TensorDict({keys.QUESTION: model.tokenize([q.text for q in questions]),
+                        keys.FIRST_FEATURES: maps, keys.LAST_FEATURES: maps,
+                        keys.ANSWER_LABEL: torch.tensor([small_dataset.answers.index(q.answer) for q in questions]),
+                        keys.QUESTION_CLASSES: torch.tensor([[1 + small_dataset.classes.index(q.classes[0]), -1]
+                                                             for q in questions])}, batch_size=[n])
+    loss = VQALoss(vqa_module(model, from_features=True), grounding=grounding_module(model), grounding_weight=1.0)
+    optim = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=3e-3)
+    with torch.no_grad():
+        first = loss(batch)
+    assert {"loss_vqa", "loss_grounding", "grounding_accuracy"} <= set(first.keys())
+    for _ in range(150):
+        out = loss(batch)
+        optim.zero_grad()
+        sum(v for key, v in out.items() if key.startswith("loss_")).backward()
+        optim.step()
+    with torch.no_grad():
+        last = loss(batch)
+        choice = model.grounding_logits(batch[keys.QUESTION])[:, 0].argmax(-1)
+    assert float(last["loss_grounding"]) < 0.3 * float(first["loss_grounding"])
+    assert float(last["grounding_accuracy"]) == 1.0 and torch.equal(choice, batch[keys.QUESTION_CLASSES][:, 0])
+    none = batch.clone()
+    none.set(keys.QUESTION_CLASSES, torch.full((n, 2), -1))                     # no class named: no grounding term
+    assert float(loss(none)["loss_grounding"].detach()) == 0.0
+    with pytest.raises(KeyError, match="question_class_labels"):
+        loss(batch.exclude(keys.QUESTION_CLASSES))
+    with pytest.raises(ValueError, match="pool='classes'"):
+        VQAModel(small_dataset.vocab.itos, small_dataset.answers, pool="eqa").grounding_logits(batch[keys.QUESTION])
+    # the recipe: vqa=classes trains with the grounding term and logs its accuracy
+    encoder = save_encoder(FrameEncoder(num_classes=k), tmp_path / "encoder.pt", {"classes": list(small_dataset.classes)})
+    _, overrides = answering_root
+    train_vqa = load_recipe("train_vqa")
+    out = tmp_path / "vqa"
+    train_vqa.train(compose_recipe_config("train_vqa", [
+        *overrides, "logger.wandb=false", "logger.progress=false", "system=random", "vqa=classes", f"out_dir={out}",
+        f"encoder.weights={encoder}", "train.steps=2", "train.batch_size=4", "train.eval_interval=2", "train.augment=false"]))
+    assert _steps(out, "train/grounding_accuracy") == [2]

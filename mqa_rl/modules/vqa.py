@@ -99,12 +99,15 @@ class QuestionClassPool(nn.Module):
         self.norm = nn.LayerNorm(2 * width + 2 * heads)
         self.out = nn.Sequential(nn.Linear(2 * width + 2 * heads, dim), nn.ReLU(inplace=True), nn.Dropout(dropout))
 
+    def choice_logits(self, q: torch.Tensor) -> torch.Tensor:
+        """[N, H, K]: which class each head picks, before the softmax (what the grounding loss supervises)."""
+        return self.select(q).view(q.shape[0], self.heads, -1)
+
     def forward(self, maps: torch.Tensor, q: torch.Tensor) -> torch.Tensor:
         maps = maps.float()
         k = maps.shape[1] // 2
         probs, density = maps[:, :k].exp(), maps[:, k:]                           # [N, K, h, w] each
-        n = maps.shape[0]
-        choice = F.softmax(self.select(q).view(n, self.heads, k), dim=-1)        # [N, H, K]
+        choice = F.softmax(self.choice_logits(q), dim=-1)                        # [N, H, K]
         area = torch.einsum("nhk,nkyx->nhyx", choice, probs)                     # share of the asked class per cell
         objects = torch.einsum("nhk,nkyx->nhyx", choice, density)                # its objects' centres
         both = torch.cat([area, objects], 1)
@@ -189,6 +192,19 @@ class VQAModel(nn.Module):
         attended = (attention.unsqueeze(-1) * v).sum(1)
         return self.classifier(q * attended), attention
 
+    @property
+    def grounds_classes(self) -> bool:
+        """Whether the question picks encoder classes (``pool="classes"``): then ``grounding_logits`` exists."""
+        return self.pool == "classes"
+
+    def grounding_logits(self, question: torch.Tensor) -> torch.Tensor:
+        """[B, heads, K]: the classes pool's choice of class per head, from tokens [B, L]. Learnt from the
+        answers alone, the choice stayed near uniform (README, "Which class is the question about?"); the
+        grounding loss (``VQALoss(grounding=...)``) supervises it with the classes the question names."""
+        if not self.grounds_classes:
+            raise ValueError(f"pool={self.pool!r} picks no classes: grounding_logits needs pool='classes'")
+        return self.image_fc.choice_logits(self.question(question))
+
     def forward(self, question: torch.Tensor, first_rgb: torch.Tensor, last_rgb: torch.Tensor):
         """(logits [B, A], attention [B, 2]) from tokens [B, L] and uint8 images [B, 3, H, W]."""
         return self.forward_features(question, self.encode_frames(first_rgb), self.encode_frames(last_rgb))
@@ -263,6 +279,12 @@ class _FromFeatures(nn.Module):
 
     def forward(self, question, first, last):
         return self.model.forward_features(question, first, last)
+
+
+def grounding_module(model: VQAModel) -> TensorDictModule:
+    """The classes pool's choice of class per head as a TensorDict module (question → grounding logits),
+    for ``VQALoss(grounding=...)``."""
+    return TensorDictModule(model.grounding_logits, in_keys=[keys.QUESTION], out_keys=[keys.GROUNDING_LOGITS])
 
 
 def vqa_module(model: VQAModel, *, from_features: bool = False) -> TensorDictModule:

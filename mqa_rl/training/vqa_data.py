@@ -73,6 +73,16 @@ def encode_store(store: str | Path, encode, *, transforms: int = 1, batch_size: 
     return records
 
 
+def question_class_labels(records: TensorDict, dataset: MQADataset) -> torch.Tensor:
+    """int64 [N, 2]: the classes each record's question names (``QUESTION_CLASSES``: 1 + index into
+    ``dataset.classes``, the encoder's class channels; −1 where it names fewer), for the grounding loss."""
+    labels = torch.full((records.shape[0], 2), -1, dtype=torch.int64)
+    for i, q in enumerate(records.get(keys.QUESTION_ID).tolist()):
+        named = dataset.questions[int(q)].classes[:2]
+        labels[i, :len(named)] = torch.tensor([1 + dataset.classes.index(c) for c in named])
+    return labels
+
+
 def scene_split(records: TensorDict, val_fraction: float, seed: int = 0) -> torch.Tensor:
     """Bool [N]: the records whose scene is held out for validation (≈ ``val_fraction`` of each level's
     scenes, at least one where a level has two or more; none when ``val_fraction`` is 0)."""
