@@ -130,6 +130,14 @@ def evaluate(cfg: DictConfig) -> dict:
                 lv: ans.paired_difference(right, records, r_right[r_mask], r_rec[r_mask],
                                           mask_a=counting & (records.get(keys.LEVEL) == i))
                 for i, lv in enumerate(LEVELS)}
+    # paired differences to the answer prior (the training split's majority answer per type and level)
+    prior = ans.prior_answers(ds, "train")
+    for name, (records, right) in data.items():
+        counting = records.get(keys.TYPE_LABEL) == QUESTION_TYPES.index("counting")
+        results["systems"][name]["vs_prior"] = {
+            lv: ans.paired_difference(right, records, ans.prior_right(records, prior), records,
+                                      mask_a=counting & (records.get(keys.LEVEL) == i))
+            for i, lv in enumerate(LEVELS)}
     # the answer prior on the test plan's questions (needs no rollout)
     qs = [ds.questions[i] for i in plan]
     answer_index = {a: i for i, a in enumerate(ds.answers)}
@@ -138,7 +146,7 @@ def evaluate(cfg: DictConfig) -> dict:
         keys.LEVEL: torch.tensor([LEVELS.index(ds.scene(q.scene_id).difficulty) for q in qs]),
         keys.ANSWER_LABEL: torch.tensor([answer_index[q.answer] for q in qs])}, batch_size=[len(qs)])
     results["references"]["answer prior (train majority per type and level)"] = ans.accuracy_table(
-        ans.prior_right(plan_td, ans.prior_answers(ds, "train")), plan_td)
+        ans.prior_right(plan_td, prior), plan_td)
 
     out = Path(cfg.out_dir)
     head = (f"COUNTING accuracy on the test split ({cfg.questions.name} questions, VQA {cfg.vqa.name}), ± Wilson 95 % "

@@ -70,6 +70,12 @@ def test_evaluate_writes_table3_and_names_what_is_missing(small_dataset, trained
     n = sum(c["n"] for lv, c in sys_res["random"]["accuracy"]["counting"].items() if lv != "all")
     assert n == sys_res["random"]["episodes"] == 4
     assert "vs_random" in sys_res["no_manipulation"]
+    prior = results["references"]["answer prior (train majority per type and level)"]["counting"]
+    for lv in ("easy", "hard"):            # one test rollout per question: the paired mean is the difference of accuracies
+        mean, _, n = sys_res["random"]["vs_prior"][lv]
+        assert n == prior[lv]["n"] and mean == pytest.approx(
+            sys_res["random"]["accuracy"]["counting"][lv]["accuracy"] - prior[lv]["accuracy"])
+    assert "− answer prior (paired)" in table
     assert sys_res["no_manipulation"]["policy"]["all"]["pushes"][0] == 0.0
     with open(out / "table3.csv") as f:
         rows = list(csv.DictReader(f))

@@ -4,7 +4,7 @@ CSV and a bar chart. Every file is written atomically.
 
 ``results["systems"][name]`` is either ``{"status": "missing", "reason": ..., "command": ...}`` or
 ``{"status": "ok", "accuracy": {type: {level: {accuracy, low, high, n}}}, "vs_random": {level: [mean,
-half, n]}, "counter_first" / "counter_last": like accuracy, "policy": {level: {metric: [mean, half, n]}}}``;
+half, n]}, "vs_prior": the same against the answer prior, "counter_first" / "counter_last": like accuracy, "policy": {level: {metric: [mean, half, n]}}}``;
 ``results["references"]`` maps a reference's name (the answer prior) to an accuracy table.
 """
 
@@ -58,19 +58,21 @@ def _label(name: str) -> str:
 
 def table3_markdown(results: dict, qtype: str = "counting") -> str:
     head = ("| system | " + " | ".join(LEVELS) + " | paper: " + " / ".join(LEVELS)
-            + " | − random (paired by question): " + " / ".join(LEVELS) + " |")
-    lines = [head, "|---|" + "---|" * (len(LEVELS) + 2)]
+            + " | − random (paired by question): " + " / ".join(LEVELS)
+            + " | − answer prior (paired): " + " / ".join(LEVELS) + " |")
+    lines = [head, "|---|" + "---|" * (len(LEVELS) + 3)]
     for name, res in results["systems"].items():
         paper = " / ".join(f"{TABLE_III[name][lv]:.3f}" for lv in LEVELS) if name in TABLE_III else "—"
         if res["status"] != "ok":
-            lines.append(f"| {_label(name)} | " + " | ".join(["missing"] * len(LEVELS)) + f" | {paper} | {res['reason']} |")
+            lines.append(f"| {_label(name)} | " + " | ".join(["missing"] * len(LEVELS)) + f" | {paper} | {res['reason']} | |")
             continue
         cells = [_acc(res["accuracy"].get(qtype, {}).get(lv)) for lv in LEVELS]
         vs = " / ".join(_mean(res["vs_random"][lv]) for lv in LEVELS) if res.get("vs_random") else "—"
-        lines.append(f"| {_label(name)} | " + " | ".join(cells) + f" | {paper} | {vs} |")
+        prior = " / ".join(_mean(res["vs_prior"][lv]) for lv in LEVELS) if res.get("vs_prior") else "—"
+        lines.append(f"| {_label(name)} | " + " | ".join(cells) + f" | {paper} | {vs} | {prior} |")
     for name, table in results.get("references", {}).items():
         cells = [_acc(table.get(qtype, {}).get(lv)) for lv in LEVELS]
-        lines.append(f"| *{name}* | " + " | ".join(cells) + " | — | — |")
+        lines.append(f"| *{name}* | " + " | ".join(cells) + " | — | — | — |")
     return "\n".join(lines)
 
 
@@ -126,25 +128,26 @@ def rows_csv(results: dict) -> str:
     buf = io.StringIO()
     w = csv.writer(buf)
     w.writerow(["system", "status", "type", "level", "accuracy", "low", "high", "n", "paper", "vs_random", "vs_random_ci95",
-                "pushes", "chi_end", "chi_change", "counter_first", "counter_last"])
+                "vs_prior", "vs_prior_ci95", "pushes", "chi_end", "chi_change", "counter_first", "counter_last"])
     for name, res in results["systems"].items():
         if res["status"] != "ok":
             for lv in LEVELS:
-                w.writerow([name, "missing", "counting", lv, "", "", "", 0, TABLE_III.get(name, {}).get(lv, "")] + [""] * 7)
+                w.writerow([name, "missing", "counting", lv, "", "", "", 0, TABLE_III.get(name, {}).get(lv, "")] + [""] * 9)
             continue
         for qtype, cells in res["accuracy"].items():
             for lv, c in cells.items():
                 vs = res["vs_random"].get(lv, ("", "", 0)) if res.get("vs_random") and qtype == "counting" else ("", "", 0)
+                vp = res["vs_prior"].get(lv, ("", "", 0)) if res.get("vs_prior") and qtype == "counting" else ("", "", 0)
                 pol = res["policy"].get(lv, {})
                 cf = res["counter_first"].get(qtype, {}).get(lv, {}).get("accuracy", "")
                 cl = res["counter_last"].get(qtype, {}).get(lv, {}).get("accuracy", "")
                 paper = TABLE_III.get(name, {}).get(lv, "") if qtype == "counting" else ""
-                w.writerow([name, "ok", qtype, lv, c["accuracy"], c["low"], c["high"], c["n"], paper, vs[0], vs[1],
+                w.writerow([name, "ok", qtype, lv, c["accuracy"], c["low"], c["high"], c["n"], paper, vs[0], vs[1], vp[0], vp[1],
                             pol.get("pushes", ("",))[0], pol.get("chi_end", ("",))[0], pol.get("chi_change", ("",))[0], cf, cl])
     for name, table in results.get("references", {}).items():
         for qtype, cells in table.items():
             for lv, c in cells.items():
-                w.writerow([name, "reference", qtype, lv, c["accuracy"], c["low"], c["high"], c["n"]] + [""] * 8)
+                w.writerow([name, "reference", qtype, lv, c["accuracy"], c["low"], c["high"], c["n"]] + [""] * 10)
     return buf.getvalue()
 
 
