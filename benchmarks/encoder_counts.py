@@ -1,0 +1,60 @@
+"""How well does a pretrained VQA encoder count the asked class on scenes it never saw? Its density head's
+sum for the question's class, rounded (0-3), against the objects of that class with >= 20 visible pixels
+(what a perfect counter reads) and against the answer, per level, on a system's test rollouts. It judges
+an encoder in seconds, before any VQA is trained on it (README, "Which class is the question about?").
+
+    python benchmarks/encoder_counts.py --encoder checkpoints/vqa_encoder/encoder.pt \
+        --rollouts runs/answering/rollouts/counting/no_manipulation/test
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import torch
+
+from mqa_rl import keys
+from mqa_rl.collectors.store import load_records
+from mqa_rl.data import MQADataset
+from mqa_rl.data.dataset import LEVELS
+from mqa_rl.transforms.episode_stats import COUNTABLE_PX
+from mqa_rl.modules.vqa_encoder import load_encoder, standardise
+
+
+@torch.no_grad()
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--encoder", required=True)
+    p.add_argument("--rollouts", required=True, help="a rollout store (e.g. .../no_manipulation/test): its first images")
+    p.add_argument("--dataset", default="data/mqa")
+    a = p.parse_args()
+    ds = MQADataset(a.dataset)
+    encoder, _ = load_encoder(a.encoder)
+    encoder.eval()
+    rec = load_records(a.rollouts, (keys.QUESTION_ID, keys.ANSWER_LABEL, keys.LEVEL, keys.SCENE, keys.FIRST_RGB,
+                                    (keys.FIRST, keys.OBJECT_MAP)))
+    rows = {lv: [] for lv in range(len(LEVELS))}
+    for start in range(0, rec.shape[0], 64):
+        batch = rec[start:start + 64]
+        maps = encoder.class_maps(standardise(batch[keys.FIRST_RGB], encoder.image_size))
+        density = maps[:, maps.shape[1] // 2:].sum((-1, -2))                                  # [B, K] objects per class
+        for j in range(batch.shape[0]):
+            q = ds.questions[int(batch[keys.QUESTION_ID][j])]
+            if q.type != "counting":
+                continue
+            cls = q.classes[0]
+            estimate = int(min(3, max(0, round(float(density[j, 1 + ds.classes.index(cls)])))))
+            objects, object_map = ds.scenes[int(batch[keys.SCENE][j])].objects, batch[(keys.FIRST, keys.OBJECT_MAP)][j]
+            visible = sum(int((object_map == s + 1).sum()) >= COUNTABLE_PX for s, o in enumerate(objects) if o.class_name == cls)
+            rows[int(batch[keys.LEVEL][j])].append((estimate, visible, int(ds.answers[int(batch[keys.ANSWER_LABEL][j])])))
+    print(f"{a.encoder} on {a.rollouts} (first images, COUNTING questions):")
+    for lv, r in rows.items():
+        if r:
+            t = torch.tensor(r, dtype=torch.float64)
+            print(f"  {LEVELS[lv]:6s} n={len(r):4d}  density count = visible {float((t[:, 0] == t[:, 1]).double().mean()):.3f}  "
+                  f"= answer {float((t[:, 0] == t[:, 2]).double().mean()):.3f}  (perfect counter = answer {float((t[:, 1] == t[:, 2]).double().mean()):.3f}; "
+                  f"mean |count - visible| {float((t[:, 0] - t[:, 1]).abs().mean()):.2f})")
+
+
+if __name__ == "__main__":
+    main()
