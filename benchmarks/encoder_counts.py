@@ -1,6 +1,6 @@
 """How well does a pretrained VQA encoder count the asked class on scenes it never saw? Its density head's
-sum for the question's class, rounded (0-3), against the objects of that class with >= 20 visible pixels
-(what a perfect counter reads) and against the answer, per level, on a system's test rollouts. It judges
+sum for the question's class, rounded (0-3), against the targets with >= 20 visible pixels (what
+evaluate.py's perfect counter reads) and against the answer, per level, on a system's test rollouts. It judges
 an encoder in seconds, before any VQA is trained on it (README, "Which class is the question about?").
 
     python benchmarks/encoder_counts.py --encoder checkpoints/vqa_encoder/encoder.pt \
@@ -17,7 +17,7 @@ from mqa_rl import keys
 from mqa_rl.collectors.store import load_records
 from mqa_rl.data import MQADataset
 from mqa_rl.data.dataset import LEVELS
-from mqa_rl.transforms.episode_stats import COUNTABLE_PX
+from mqa_rl.evaluation.answering import countable_targets
 from mqa_rl.modules.vqa_encoder import load_encoder, standardise
 
 
@@ -31,8 +31,9 @@ def main() -> None:
     ds = MQADataset(a.dataset)
     encoder, _ = load_encoder(a.encoder)
     encoder.eval()
-    rec = load_records(a.rollouts, (keys.QUESTION_ID, keys.ANSWER_LABEL, keys.LEVEL, keys.SCENE, keys.FIRST_RGB,
-                                    (keys.FIRST, keys.OBJECT_MAP)))
+    rec = load_records(a.rollouts, (keys.QUESTION_ID, keys.ANSWER_LABEL, keys.LEVEL, keys.FIRST_RGB,
+                                    (keys.FIRST, keys.FRAME_VISIBLE), keys.EPISODE_TARGETS))
+    visible = countable_targets(rec, keys.FIRST)                                            # what a perfect counter reads
     rows = {lv: [] for lv in range(len(LEVELS))}
     for start in range(0, rec.shape[0], 64):
         batch = rec[start:start + 64]
@@ -42,11 +43,8 @@ def main() -> None:
             q = ds.questions[int(batch[keys.QUESTION_ID][j])]
             if q.type != "counting":
                 continue
-            cls = q.classes[0]
-            estimate = int(min(3, max(0, round(float(density[j, 1 + ds.classes.index(cls)])))))
-            objects, object_map = ds.scenes[int(batch[keys.SCENE][j])].objects, batch[(keys.FIRST, keys.OBJECT_MAP)][j]
-            visible = sum(int((object_map == s + 1).sum()) >= COUNTABLE_PX for s, o in enumerate(objects) if o.class_name == cls)
-            rows[int(batch[keys.LEVEL][j])].append((estimate, visible, int(ds.answers[int(batch[keys.ANSWER_LABEL][j])])))
+            estimate = int(min(3, max(0, round(float(density[j, 1 + ds.classes.index(q.classes[0])])))))
+            rows[int(batch[keys.LEVEL][j])].append((estimate, int(visible[start + j]), int(q.answer)))
     print(f"{a.encoder} on {a.rollouts} (first images, COUNTING questions):")
     for lv, r in rows.items():
         if r:

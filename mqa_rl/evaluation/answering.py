@@ -92,11 +92,16 @@ def paired_difference(right_a: torch.Tensor, records_a: TensorDict, right_b: tor
     return mean_ci95(torch.tensor([a[q] - b[q] for q in common], dtype=torch.float64))
 
 
+def countable_targets(records: TensorDict, frame: str = keys.LAST, min_px: float = COUNTABLE_PX) -> torch.Tensor:
+    """Int [N]: the question's targets with ≥ ``min_px`` visible pixels in ``frame`` (what a perfect counter reads)."""
+    visible = records.get((frame, keys.FRAME_VISIBLE))
+    return ((visible >= min_px) & records.get(keys.EPISODE_TARGETS)).sum(-1)
+
+
 def counter_right(records: TensorDict, answers, frame: str = keys.LAST, min_px: float = COUNTABLE_PX) -> torch.Tensor:
     """Bool [N]: a perfect counter of the targets with ≥ ``min_px`` visible pixels in ``frame`` is right
     (COUNTING records only; False elsewhere)."""
-    visible = records.get((frame, keys.FRAME_VISIBLE))
-    counted = ((visible >= min_px) & records.get(keys.EPISODE_TARGETS)).sum(-1)
+    counted = countable_targets(records, frame, min_px)
     labels = records.get(keys.ANSWER_LABEL).tolist()
     truth = torch.tensor([int(answers[a]) if answers[a].isdigit() else -1 for a in labels])
     return (counted == truth) & (records.get(keys.TYPE_LABEL) == QUESTION_TYPES.index("counting"))

@@ -143,12 +143,16 @@ class Batches:
 SCENE_OFFSET = 1_000_000      # pretraining frames of a store on another dataset: scene ids + k · SCENE_OFFSET
 
 
-def store_dataset(store: str | Path, dataset):
+def store_dataset(store: str | Path, dataset, loaded: dict | None = None):
     """The ``MQADataset`` a rollout store was collected on: ``dataset`` itself, or the one its meta names
-    (checked by fingerprint, and it must have ``dataset``'s classes: the class labels index them)."""
+    (checked by fingerprint, and it must have ``dataset``'s classes: the class labels index them).
+    ``loaded`` ({fingerprint: dataset}) keeps datasets already read: a 1,000-scene one takes seconds."""
     info = read_meta(store).get("dataset", {})
-    if info.get("manifest_sha256") in (None, dataset_fingerprint(dataset.root)):
+    loaded = {dataset_fingerprint(dataset.root): dataset} if loaded is None else loaded
+    if info.get("manifest_sha256") is None:
         return dataset
+    if info["manifest_sha256"] in loaded:
+        return loaded[info["manifest_sha256"]]
     root = Path(info.get("root", ""))
     if not (root / "manifest.json").is_file() or dataset_fingerprint(root) != info["manifest_sha256"]:
         raise ValueError(f"{store} was collected on the dataset {info.get('root')!r}, which is not there (or has "
@@ -157,6 +161,7 @@ def store_dataset(store: str | Path, dataset):
     if list(other.classes) != list(dataset.classes):
         raise ValueError(f"{store} was collected on {root}, whose classes differ from {dataset.root}'s: its class "
                          f"labels would mean other objects; pretrain on stores of datasets with the same object library")
+    loaded[info["manifest_sha256"]] = other
     return other
 
 
@@ -169,16 +174,18 @@ def pretraining_frames(stores, dataset, *, max_frames: int | None = None, seed: 
     scenes to learn to see from: ``make_dataset.py dataset.seed=1 dataset.out_dir=...``) is read with
     that one, its scene ids offset by ``SCENE_OFFSET`` per extra dataset so that scenes stay distinct."""
     wanted = (keys.RGB, keys.DEPTH, keys.OBJECT_MAP)
-    picks = []                                       # (chunk path, frame, row, scene, level, dataset)
+    picks = []                                       # (chunk path, frame, row, scene, level, dataset, scene offset)
     seen_scenes = set()
-    offsets = {dataset_fingerprint(dataset.root): 0}
+    loaded = {dataset_fingerprint(dataset.root): dataset}
+    offsets = {fingerprint: 0 for fingerprint in loaded}
     for store in stores:
         meta = read_meta(store)
         if not (meta.get("stored", {}).get("depth") and meta.get("stored", {}).get("object_map")):
             raise ValueError(f"{store} was collected without depth or object maps (collection.store_depth / "
                              f"store_object_map false): pretraining needs both")
-        ds = store_dataset(store, dataset)
-        offset = offsets.setdefault(dataset_fingerprint(ds.root), len(offsets) * SCENE_OFFSET)
+        ds = store_dataset(store, dataset, loaded)
+        fingerprint = next(f for f, d in loaded.items() if d is ds)
+        offset = offsets.setdefault(fingerprint, len(offsets) * SCENE_OFFSET)
         for path in chunk_paths(store):
             chunk = TensorDict.load_memmap(path)
             scenes, levels = chunk.get(keys.SCENE).tolist(), chunk.get(keys.LEVEL).tolist()
