@@ -10,7 +10,11 @@
 #   4. Table III, per type, policies, Fig. 7                       -> runs/answering/report/counting-eqa
 # Each system is complete before the next starts, and every step resumes or skips what is done, so an
 # interrupted run continues where it stopped and evaluate.py reports the systems finished so far.
-# MQA_EXTRA: overrides for every answering recipe (e.g. "root=runs/answering_b vqa=classes").
+# MQA_VQA=classes: ours instead of EQA's head (the grounded class pool, README "Which class is the question
+#   about?") on the encoder pretrained on 1,000 more scenes (checkpoints/vqa_encoder_scenes; MQA_TRAIN=1 pretrains
+#   one here on random's frames instead, tools/pretrain_encoder_scenes.sh remakes the shipped one);
+#   the report goes to runs/answering/report/counting-classes.
+# MQA_EXTRA: overrides for every answering recipe (e.g. "root=runs/answering_b").
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 . tools/bootstrap.sh
@@ -31,12 +35,14 @@ for v in global local global_local; do
 done
 step "rollouts of random (the VQA encoder learns from their frames)"
 python recipes/collect_rollouts.py "${EXTRA[@]}" system=random
-VQA=()
+VQA=("vqa=${MQA_VQA:-eqa}")
+ENCODER=checkpoints/vqa_encoder
+[ "${MQA_VQA:-eqa}" = classes ] && ENCODER=checkpoints/vqa_encoder_scenes
 ROOT=runs/answering
 for a in "${EXTRA[@]}"; do case $a in root=*) ROOT=${a#root=} ;; esac; done
-if [ -z "${MQA_TRAIN:-}" ] && [ -f checkpoints/vqa_encoder/encoder.pt ] && [ ! -d "$ROOT/encoder" ]; then
-  step "VQA encoder: the shipped one, checkpoints/vqa_encoder/encoder.pt"
-  VQA=(encoder.weights=checkpoints/vqa_encoder/encoder.pt)
+if [ -z "${MQA_TRAIN:-}" ] && [ -f "$ENCODER/encoder.pt" ] && [ ! -d "$ROOT/encoder" ]; then
+  step "VQA encoder: the shipped one, $ENCODER/encoder.pt"
+  VQA+=("encoder.weights=$ENCODER/encoder.pt")
 else
   step "VQA encoder pretraining"
   python recipes/pretrain_vqa_encoder.py "${EXTRA[@]}" resume=true
@@ -48,5 +54,5 @@ for s in random no_manipulation privileged dqn_global dqn_local dqn_global_local
   python recipes/train_vqa.py "${EXTRA[@]}" "system=$s" resume=true "${VQA[@]}"
 done
 step "Table III"
-python recipes/evaluate.py "${EXTRA[@]}"
+python recipes/evaluate.py "${EXTRA[@]}" "vqa=${MQA_VQA:-eqa}"
 step "done"
