@@ -47,6 +47,8 @@ from mqa_rl.training.vqa_data import IMAGE_KEYS, RECORD_KEYS  # noqa: E402
 
 EVAL_KEYS = (*RECORD_KEYS, *IMAGE_KEYS, keys.EPISODE_TARGETS, (keys.FIRST, keys.FRAME_VISIBLE),
              (keys.LAST, keys.FRAME_VISIBLE))
+# what the calibrated counter reads from the training rollouts
+COUNT_KEYS = (keys.TYPE_LABEL, keys.LEVEL, keys.ANSWER_LABEL, keys.EPISODE_TARGETS, (keys.LAST, keys.FRAME_VISIBLE))
 
 
 def missing(reason: str, command: str) -> dict:
@@ -98,9 +100,20 @@ def evaluate_system(cfg: DictConfig, ds: MQADataset, name: str, plan_sha: str) -
               "accuracy": ans.accuracy_table(right, records),
               "counter_first": ans.accuracy_table(ans.counter_right(sub, ds.answers, keys.FIRST), sub),
               "counter_last": ans.accuracy_table(ans.counter_right(sub, ds.answers, keys.LAST), sub),
+              **calibrated_counter(Path(cfg.rollouts_dir) / name / "train", sub),
               "policy": ans.policy_stats(records),
               "seconds": {"collect_or_load": round(collect_seconds, 1), "answer": round(time.perf_counter() - t1, 1)}}
     return result, records, right
+
+
+def calibrated_counter(train_store: Path, test: TensorDict) -> dict:
+    """{"counter_calibrated": accuracy table} of the perfect count on I_stop mapped to answers as in the
+    system's training rollouts (``ans.calibrated_counter_right``); {} when those are gone."""
+    try:
+        train = load_records(train_store, COUNT_KEYS)
+    except (FileNotFoundError, StoreError):
+        return {}
+    return {"counter_calibrated": ans.accuracy_table(ans.calibrated_counter_right(train, test, keys.LAST), test)}
 
 
 def evaluate(cfg: DictConfig) -> dict:

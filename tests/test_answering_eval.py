@@ -38,6 +38,25 @@ def test_statistics():
     assert ans.counter_right(counting, answers).tolist() == [True, False]   # 1 target seen of 1 / none of 1
 
 
+def test_calibrated_counter_maps_each_visible_count_to_its_most_frequent_answer_per_level():
+    def records(level, seen, answer, qtype=None):
+        """One target per episode, visible (30 px) or hidden (0 px)."""
+        n = len(level)
+        return TensorDict({keys.LEVEL: torch.tensor(level), keys.ANSWER_LABEL: torch.tensor(answer),
+                           keys.TYPE_LABEL: torch.tensor(qtype or [0] * n),
+                           keys.EPISODE_TARGETS: torch.ones(n, 1, dtype=torch.bool),
+                           (keys.LAST, keys.FRAME_VISIBLE): torch.tensor([[30.0 * s] for s in seen])}, batch_size=[n])
+    # hard (level 2): one visible target was a 3 twice, a 1 once; easy (level 0): one visible is a 1.
+    # The yes/no question (type 1) with answer 4 must not count.
+    train = records([2, 2, 2, 0, 0, 2], [1, 1, 1, 1, 0, 1], [3, 3, 1, 1, 0, 4], [0, 0, 0, 0, 0, 1])
+    test = records([2, 2, 0, 0, 0], [1, 0, 1, 0, 1], [3, 3, 1, 0, 1], [0, 0, 0, 0, 1])
+    right = ans.calibrated_counter_right(train, test)
+    # a count never seen at that level falls back to the level's majority (hard: 3); non-counting is False
+    assert right.tolist() == [True, True, True, True, False]
+    # the plain counter says 1 where the calibrated one says 3
+    assert ans.counter_right(test, ("0", "1", "2", "3", "yes", "no")).tolist() == [False, False, True, True, False]
+
+
 @pytest.fixture(scope="module")
 def trained(answering_root):
     root, overrides = answering_root
@@ -82,7 +101,8 @@ def test_evaluate_writes_table3_and_names_what_is_missing(small_dataset, trained
     assert {r["system"] for r in rows} >= {"random", "no_manipulation", "dqn_local"}
     assert any(r["status"] == "missing" and r["paper"] == "0.4458" for r in rows)
     assert (out / "table3.png").stat().st_size > 0 and "counting" in (out / "per_type.md").read_text()
-    assert "perfect counter" in (out / "policy.md").read_text()
+    assert "perfect counter" in (out / "policy.md").read_text() and "calibrated on I_stop" in (out / "policy.md").read_text()
+    assert set(sys_res["random"]["counter_calibrated"]["counting"]) == {"easy", "hard", "all"}
     assert json.loads((out / "results.json").read_text())["systems"]["random"]["episodes"] == 4
 
 

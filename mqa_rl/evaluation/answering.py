@@ -9,6 +9,10 @@
 * ``counter_right``: whether a *perfect counter* (counts the targets with ≥ ``min_px`` visible pixels)
   would answer a COUNTING question right from the episode's first or last image: what the images
   allow, whatever the VQA makes of them (the occlusion benchmark's rule).
+* ``calibrated_counter_right``: the same perfect count, mapped to the answer most often seen with that
+  count at that level in the system's *training* rollouts: the best a VQA that reads only the visible
+  count can do. In hard scenes the answer counts hidden objects too, so a visible count of 2 is more
+  often a 3; this, not the raw counter, is the ceiling to hold a count-reading VQA against.
 * ``prior_answers``: the majority answer per (type, level) among the training questions: a VQA that
   ignores the images and the question's object can reach this.
 * ``policy_stats``: pushes, targets' χ at the end and its change, per level, ± 95 % (``mean_ci95``).
@@ -105,6 +109,28 @@ def counter_right(records: TensorDict, answers, frame: str = keys.LAST, min_px: 
     labels = records.get(keys.ANSWER_LABEL).tolist()
     truth = torch.tensor([int(answers[a]) if answers[a].isdigit() else -1 for a in labels])
     return (counted == truth) & (records.get(keys.TYPE_LABEL) == QUESTION_TYPES.index("counting"))
+
+
+def calibrated_counter_right(train: TensorDict, test: TensorDict, frame: str = keys.LAST,
+                             min_px: float = COUNTABLE_PX) -> torch.Tensor:
+    """Bool [N test]: the answer most frequent in ``train`` for the same (level, perfect visible count) is
+    right (the level's most frequent answer for a count never seen in training); COUNTING records only,
+    False elsewhere. Both record sets need the keys ``countable_targets`` reads, the level and the answer."""
+    counting = QUESTION_TYPES.index("counting")
+    seen: dict[tuple[int, int], Counter] = {}
+    by_level: dict[int, Counter] = {}
+    rows = zip(train.get(keys.LEVEL).tolist(), countable_targets(train, frame, min_px).tolist(),
+               train.get(keys.ANSWER_LABEL).tolist(), train.get(keys.TYPE_LABEL).tolist())
+    for level, count, answer, qtype in rows:
+        if qtype == counting:
+            seen.setdefault((level, count), Counter())[answer] += 1
+            by_level.setdefault(level, Counter())[answer] += 1
+    guesses = []
+    for level, count in zip(test.get(keys.LEVEL).tolist(), countable_targets(test, frame, min_px).tolist()):
+        table = seen.get((level, count)) or by_level.get(level)
+        guesses.append(table.most_common(1)[0][0] if table else -1)
+    truth = test.get(keys.ANSWER_LABEL)
+    return (torch.tensor(guesses, dtype=truth.dtype) == truth) & (test.get(keys.TYPE_LABEL) == counting)
 
 
 def prior_answers(dataset, split: str = "train") -> dict[tuple[int, int], int]:
