@@ -19,6 +19,7 @@ import os
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")      # see train_dqn.py: idle threads must not spin
 
 import json  # noqa: E402
+import math  # noqa: E402
 import random  # noqa: E402
 import time  # noqa: E402
 import warnings  # noqa: E402
@@ -45,6 +46,8 @@ from mqa_rl.training.signals import exit_on_sigterm  # noqa: E402
 from mqa_rl.training.vqa_data import (DIHEDRAL, Batches, encode_store, load_answering_records,  # noqa: E402
                                       question_class_labels, scene_split)
 
+# validation metric that picks the kept checkpoint -> its score (higher is better)
+SELECT = {"accuracy": lambda m: m["val/accuracy"], "loss": lambda m: -m["val/loss"]}
 MODEL_OPTIONS = ("pool", "image_size", "dim", "lstm_layers", "dropout", "cell_heads")
 
 
@@ -54,6 +57,8 @@ def check_config(cfg: DictConfig) -> None:
         raise ValueError("train.steps, train.batch_size, train.eval_interval and checkpoint.interval_steps must be positive")
     if not t.grounding_weight >= 0.0:
         raise ValueError(f"train.grounding_weight={t.grounding_weight} must be ≥ 0 (0: the question's classes learnt from answers only)")
+    if t.select not in SELECT:
+        raise ValueError(f"train.select={t.select!r}: choose one of {SELECT} (the validation metric that picks vqa.pt)")
     if not 0.0 <= t.val_fraction < 1.0:
         raise ValueError(f"train.val_fraction={t.val_fraction} must lie in [0, 1)")
     if not Path(cfg.dataset).exists():
@@ -128,7 +133,7 @@ def train(cfg: DictConfig) -> dict:
                    grounding=grounding, grounding_weight=cfg.train.grounding_weight)
     params = [p for p in model.parameters() if p.requires_grad]
     optim = torch.optim.Adam(params, lr=cfg.train.lr, weight_decay=cfg.train.weight_decay)
-    state = {"step": 0, "best_val": -1.0, "best_step": -1, "train_seconds": 0.0}
+    state = {"step": 0, "best_val": -math.inf, "best_step": -1, "best_accuracy": None, "train_seconds": 0.0}
     ckpt = ModelCheckpoint(out / "checkpoints", model=model, optimizer=optim, state=state, keep_last=cfg.checkpoint.keep_last)
     if ckpt.latest() is not None:
         if not cfg.resume:
@@ -203,8 +208,9 @@ def train(cfg: DictConfig) -> dict:
                 window_loss, window_acc, window_ground, t_start = [], [], [], time.perf_counter()
                 if val_set is not None:
                     metrics.update(validate(loss, val_set, device, 4 * cfg.train.batch_size))
-                    if metrics["val/accuracy"] > state["best_val"]:
-                        state["best_val"], state["best_step"] = metrics["val/accuracy"], step
+                    score = SELECT[cfg.train.select](metrics)
+                    if score > state["best_val"]:
+                        state["best_val"], state["best_step"], state["best_accuracy"] = score, step, metrics["val/accuracy"]
                         save_vqa(model, out / CHECKPOINT_NAME, {**vqa_meta, "step": step, "val": metrics})
                 logger.log_metrics(metrics, step=step)
                 bar.set_postfix(loss=f"{metrics['train/loss']:.3f}", val=f"{metrics.get('val/accuracy', float('nan')):.3f}")
@@ -216,7 +222,8 @@ def train(cfg: DictConfig) -> dict:
     if val_set is None:
         save_vqa(model, out / CHECKPOINT_NAME, {**vqa_meta, "step": steps})
     summary = {"system": cfg.system, "steps": steps, "train_episodes": len(train_set), "val_episodes": int(val_mask.sum()),
-               "best_val_accuracy": state["best_val"] if val_set is not None else None, "best_step": state["best_step"],
+               "selected_by": f"val/{cfg.train.select}" if val_set is not None else "last step",
+               "best_val_accuracy": state.get("best_accuracy") if val_set is not None else None, "best_step": state["best_step"],
                "feature_seconds": round(feature_seconds, 1), "train_seconds": round(state["train_seconds"], 1),
                "vqa": str(out / CHECKPOINT_NAME)}
     write_atomic(out / "summary.json", json.dumps(summary, indent=1))

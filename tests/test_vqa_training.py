@@ -150,6 +150,25 @@ def test_pretrain_and_train_vqa_recipes_write_log_and_resume(small_dataset, answ
         train_vqa.train(compose_recipe_config("train_vqa", [*args, "system=privileged"]))
 
 
+def test_train_vqa_keeps_the_checkpoint_its_validation_metric_picks(small_dataset, answering_root, tmp_path, monkeypatch):
+    _, overrides = answering_root
+    train_vqa = load_recipe("train_vqa")
+    # the tiny pipeline has one training scene per level, too few to hold one out: hold out every other episode
+    monkeypatch.setattr(train_vqa, "scene_split", lambda records, fraction, seed: torch.arange(records.shape[0]) % 2 == 1)
+    args = [*overrides, "logger.wandb=false", "logger.progress=false", "system=random", "encoder.weights=null",
+            "train.batch_size=4", "train.eval_interval=1", "train.steps=6", "train.lr=0.05"]
+    for select in ("loss", "accuracy"):
+        out = tmp_path / select
+        summary = train_vqa.train(compose_recipe_config("train_vqa", [*args, f"train.select={select}", f"out_dir={out}"]))
+        with open(out / "csv" / "scalars" / "val" / f"{select}.csv") as f:
+            values = [float(row[1]) for row in csv.reader(f)]
+        best = (min if select == "loss" else max)(range(len(values)), key=lambda i: values[i])  # the first best
+        assert summary["selected_by"] == f"val/{select}" and summary["best_step"] == best + 1
+        assert load_vqa(out).meta["step"] == best + 1
+    with pytest.raises(ValueError, match="train.select"):
+        train_vqa.train(compose_recipe_config("train_vqa", [*args, "train.select=f1", f"out_dir={tmp_path / 'bad'}"]))
+
+
 def test_frame_pack_carries_the_frames_losslessly_and_pretrains_without_the_dataset(small_dataset, answering_root, tmp_path):
     root, overrides = answering_root
     quiet = ["logger.wandb=false", "logger.progress=false"]
