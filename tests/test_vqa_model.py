@@ -94,3 +94,24 @@ def test_clear_errors_for_checkpoints_and_questions(tmp_path):
         model.answer_probs(torch.tensor([[len(VOCAB) + 5]]), img, img)
     with pytest.raises(ValueError, match="uint8"):
         model.answer_probs(model.tokenize("How many cans are there in the bin?"), img.float(), img)
+
+
+def test_the_shipped_vqa_is_the_demos_default_and_answers_a_counting_question(small_dataset):
+    """checkpoints/vqa_classes/dqn_student: loads with its provenance's hash, answers through the public
+    contract, and is what recipes/conf/demo.yaml offers by default."""
+    import hashlib
+    import json
+    from pathlib import Path
+
+    from omegaconf import OmegaConf
+
+    root = Path(__file__).parents[1]
+    folder = root / "checkpoints" / "vqa_classes" / "dqn_student"
+    assert OmegaConf.load(root / "recipes" / "conf" / "demo.yaml").vqa == ["checkpoints/vqa_classes/dqn_student"]
+    provenance = json.loads((folder / "provenance.json").read_text())
+    assert hashlib.sha256((folder / "vqa.pt").read_bytes()).hexdigest() == provenance["vqa_sha256"]
+    model = load_vqa(folder)
+    assert model.meta["system"] == "dqn_student" and model.answers == list(small_dataset.answers)
+    frame = torch.full((1, 224, 224, 3), 128, dtype=torch.uint8)
+    probs = model.answer_probs(model.tokenize(["How many cans are there in the bin?"]), frame, frame)
+    assert probs.shape == (1, len(model.answers)) and torch.allclose(probs.sum(-1), torch.ones(1))
