@@ -5,6 +5,7 @@ an encoder in seconds, before any VQA is trained on it (README, "Which class is 
 
     python benchmarks/encoder_counts.py --encoder checkpoints/vqa_encoder/encoder.pt \
         --rollouts runs/answering/rollouts/counting/no_manipulation/test
+    python benchmarks/encoder_counts.py --encoder ... --rollouts .../dqn_student/test --frame last   # after the pushes
 """
 
 from __future__ import annotations
@@ -25,19 +26,21 @@ from mqa_rl.modules.vqa_encoder import load_encoder, standardise
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--encoder", required=True)
-    p.add_argument("--rollouts", required=True, help="a rollout store (e.g. .../no_manipulation/test): its first images")
+    p.add_argument("--rollouts", required=True, help="a rollout store (e.g. .../no_manipulation/test)")
+    p.add_argument("--frame", choices=("first", "last"), default="first", help="I_start or I_stop")
     p.add_argument("--dataset", default="data/mqa")
     a = p.parse_args()
     ds = MQADataset(a.dataset)
     encoder, _ = load_encoder(a.encoder)
     encoder.eval()
-    rec = load_records(a.rollouts, (keys.QUESTION_ID, keys.ANSWER_LABEL, keys.LEVEL, keys.FIRST_RGB,
-                                    (keys.FIRST, keys.FRAME_VISIBLE), keys.EPISODE_TARGETS))
-    visible = countable_targets(rec, keys.FIRST)                                            # what a perfect counter reads
+    frame, rgb = (keys.FIRST, keys.FIRST_RGB) if a.frame == "first" else (keys.LAST, keys.LAST_RGB)
+    rec = load_records(a.rollouts, (keys.QUESTION_ID, keys.ANSWER_LABEL, keys.LEVEL, rgb,
+                                    (frame, keys.FRAME_VISIBLE), keys.EPISODE_TARGETS))
+    visible = countable_targets(rec, frame)                                                 # what a perfect counter reads
     rows = {lv: [] for lv in range(len(LEVELS))}
     for start in range(0, rec.shape[0], 64):
         batch = rec[start:start + 64]
-        maps = encoder.class_maps(standardise(batch[keys.FIRST_RGB], encoder.image_size))
+        maps = encoder.class_maps(standardise(batch[rgb], encoder.image_size))
         density = maps[:, maps.shape[1] // 2:].sum((-1, -2))                                  # [B, K] objects per class
         for j in range(batch.shape[0]):
             q = ds.questions[int(batch[keys.QUESTION_ID][j])]
@@ -45,7 +48,7 @@ def main() -> None:
                 continue
             estimate = int(min(3, max(0, round(float(density[j, 1 + ds.classes.index(q.classes[0])])))))
             rows[int(batch[keys.LEVEL][j])].append((estimate, int(visible[start + j]), int(q.answer)))
-    print(f"{a.encoder} on {a.rollouts} (first images, COUNTING questions):")
+    print(f"{a.encoder} on {a.rollouts} ({a.frame} images, COUNTING questions):")
     for lv, r in rows.items():
         if r:
             t = torch.tensor(r, dtype=torch.float64)
