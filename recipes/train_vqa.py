@@ -133,13 +133,19 @@ def train(cfg: DictConfig) -> dict:
                    grounding=grounding, grounding_weight=cfg.train.grounding_weight)
     params = [p for p in model.parameters() if p.requires_grad]
     optim = torch.optim.Adam(params, lr=cfg.train.lr, weight_decay=cfg.train.weight_decay)
-    state = {"step": 0, "best_val": -math.inf, "best_step": -1, "best_accuracy": None, "train_seconds": 0.0}
+    state = {"step": 0, "best_val": -math.inf, "best_step": -1, "best_accuracy": None, "train_seconds": 0.0,
+             "select": cfg.train.select}
     ckpt = ModelCheckpoint(out / "checkpoints", model=model, optimizer=optim, state=state, keep_last=cfg.checkpoint.keep_last)
     if ckpt.latest() is not None:
         if not cfg.resume:
             raise FileExistsError(f"{out} already holds checkpoints ({ckpt.latest().name}): pass resume=true to "
                                   f"continue that run, or choose another out_dir")
+        state.pop("select")                            # runs older than train.select kept by accuracy
         path = ckpt.load()
+        started = state.setdefault("select", "accuracy")
+        if started != cfg.train.select:
+            raise ValueError(f"{out} keeps the checkpoint by val/{started}; resume it with train.select={started} "
+                             f"(its best score is in those units), or start a new out_dir")
         dropped = trim_scalars(out / "csv", state["step"])
         print(f"resumed from {path} at step {state['step']} ({dropped} log rows after it dropped)")
     elif cfg.resume:

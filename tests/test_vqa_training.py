@@ -138,6 +138,8 @@ def test_pretrain_and_train_vqa_recipes_write_log_and_resume(small_dataset, answ
     again = train_vqa.train(compose_recipe_config("train_vqa", [*args, "train.steps=9", "resume=true"]))
     assert again["steps"] == 9
     assert _steps(run, "train/loss") == [3, 6, 9]                        # continued, nothing logged twice
+    with pytest.raises(ValueError, match="train.select=loss"):           # kept by loss: resumed by loss only
+        train_vqa.train(compose_recipe_config("train_vqa", [*args, "train.steps=12", "resume=true", "train.select=accuracy"]))
     model = load_vqa(run)
     assert model.meta["system"] == "random" and model.meta["encoder"]["frozen"] and model.answers == list(small_dataset.answers)
     # a checkpoint whose files were altered is refused with what to do
