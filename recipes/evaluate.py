@@ -8,7 +8,9 @@ on its training rollouts), COUNTING accuracy per level beside the paper's, with 
 
 Per system also: accuracy per question type and level, the difference to random paired by question,
 mean pushes, the targets' χ at the end and its change, and what a perfect counter would read from the
-first and last images (is the policy or the VQA the limit?); as references, the training split's
+first and last images (is the policy or the VQA the limit?) and a calibrated counter (that count on the last image
+mapped to the answer it most often meant in the system's training rollouts: what a count-reading VQA can reach);
+as references, the training split's
 majority answer per type and level (what a VQA blind to the images reaches). A system whose policy
 checkpoint, VQA or rollouts do not exist is reported as missing, with the command that makes it;
 missing test rollouts of an available policy are collected first (``collect_missing``).
