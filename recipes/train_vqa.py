@@ -182,7 +182,8 @@ def train(cfg: DictConfig) -> dict:
         os.replace(tmp, out / "config.yaml")
     logger = RunLogger(out, wandb=cfg.logger.wandb, project=cfg.logger.project,
                        exp_name=f"vqa_{cfg.vqa.name}_{cfg.system}", config=config)
-    vqa_meta = {"system": cfg.system, "questions": cfg.questions.name, "rollouts": str(cfg.rollouts),
+    vqa_meta = {"system": cfg.system, "questions": cfg.questions.name, "question_types": list(cfg.questions.types),
+                "rollouts": str(cfg.rollouts),
                 "dataset_sha256": meta["dataset"]["manifest_sha256"], "policy": meta["policy"],
                 "encoder": {"weights": cfg.encoder.weights, "frozen": frozen, **encoder_meta},
                 "train_episodes": len(train_set), "val_episodes": int(val_mask.sum())}

@@ -199,6 +199,24 @@ def test_vqa_answer_is_shown_with_probabilities(served, monkeypatch):
     assert model.seen[3] == torch.uint8 and model.seen[2] == model.seen[4]
     assert last.answer == pytest.approx(dict(zip(model.answers, torch.softmax(torch.arange(6.0), 0).tolist())))
     assert "VQA (vqa_best): **no**" in last.answer_text and f"True answer: {q.answer}" in last.answer_text
+    assert "guess" not in last.answer_text                      # no types recorded: nothing to warn about
+
+
+def test_a_question_type_the_vqa_never_learnt_is_flagged(served, monkeypatch):
+    """A VQA trained on COUNTING only still answers an EXISTENCE question, and the page says it is a guess."""
+    from mqa_rl.demo import vqa_adapter
+
+    backend, _ = served
+    model = StandInVQA()
+    model.meta = {"question_types": ["counting"]}
+    monkeypatch.setattr(vqa_adapter, "_load_vqa", lambda: lambda path: model)
+    monkeypatch.setattr(backend, "vqa", vqa_adapter.VQARegistry(["checkpoints/vqa_counting"]))
+    for qtype, flagged in (("existence", True), ("counting", False)):
+        scene_id, q = scene_and_question(backend, "easy", qtype)
+        last = list(backend.run_episode(scene_id, q.id, None, RANDOM, "vqa_counting", 0, "test"))[-1]
+        assert last.answer is not None
+        assert ("learnt from COUNTING questions only" in last.answer_text) is flagged
+        assert ("EXISTENCE question is a guess" in last.answer_text) is flagged
 
 
 def test_vqa_problems_are_reported_not_raised(monkeypatch):

@@ -105,6 +105,8 @@ def test_the_shipped_vqa_is_the_demos_default_and_answers_a_counting_question(sm
 
     from omegaconf import OmegaConf
 
+    from mqa_rl.demo.vqa_adapter import trained_types
+
     root = Path(__file__).parents[1]
     folder = root / "checkpoints" / "vqa_classes" / "dqn_student"
     assert OmegaConf.load(root / "recipes" / "conf" / "demo.yaml").vqa == ["checkpoints/vqa_classes/dqn_student"]
@@ -112,6 +114,7 @@ def test_the_shipped_vqa_is_the_demos_default_and_answers_a_counting_question(sm
     assert hashlib.sha256((folder / "vqa.pt").read_bytes()).hexdigest() == provenance["vqa_sha256"]
     model = load_vqa(folder)
     assert model.meta["system"] == "dqn_student" and model.answers == list(small_dataset.answers)
+    assert trained_types(model, folder) == ["counting"]           # from its config.yaml (trained before the meta had it)
     frame = torch.full((1, 224, 224, 3), 128, dtype=torch.uint8)
     probs = model.answer_probs(model.tokenize(["How many cans are there in the bin?"]), frame, frame)
     assert probs.shape == (1, len(model.answers)) and torch.allclose(probs.sum(-1), torch.ones(1))

@@ -142,6 +142,7 @@ def test_pretrain_and_train_vqa_recipes_write_log_and_resume(small_dataset, answ
         train_vqa.train(compose_recipe_config("train_vqa", [*args, "train.steps=12", "resume=true", "train.select=accuracy"]))
     model = load_vqa(run)
     assert model.meta["system"] == "random" and model.meta["encoder"]["frozen"] and model.answers == list(small_dataset.answers)
+    assert model.meta["question_types"] == ["counting"]                  # the demo flags other types as guesses
     # a checkpoint whose files were altered is refused with what to do
     latest = sorted((run / "checkpoints").glob("checkpoint-*"))[-1]
     victim = next(p for p in (latest / "components").rglob("*") if p.is_file() and p.stat().st_size > 100)

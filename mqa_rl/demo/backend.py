@@ -149,7 +149,9 @@ class DemoBackend:
             return None, f"{truth} · {result}"
         best = max(result, key=result.get)
         mark = "right" if best == question.answer else "wrong"
-        return result, f"{truth} · VQA ({vqa}): **{best}** (p = {result[best]:.2f}, {mark})"
+        text = f"{truth} · VQA ({vqa}): **{best}** (p = {result[best]:.2f}, {mark})"
+        warning = self.vqa.unlearnt_type(vqa, question.type)
+        return result, text + (f" · {warning}" if warning else "")
 
     def _video(self, last, question, session: str) -> Path | None:
         path = self.files.folder(session) / f"episode_{uuid.uuid4().hex[:8]}.webm"

@@ -39,12 +39,28 @@ def answer_probs(model, tokens: torch.Tensor, first_rgb: torch.Tensor, last_rgb:
     return {a: float(p) for a, p in zip(answers, probs[0].tolist())}
 
 
+def trained_types(model, path: Path) -> list[str] | None:
+    """The question types a VQA learnt from: its meta (train_vqa.py records them), else the questions group of
+    the run's ``config.yaml`` beside the checkpoint (older runs); None when neither says."""
+    types = getattr(model, "meta", {}).get("question_types")
+    if types is None:
+        config = (path if path.is_dir() else path.parent) / "config.yaml"
+        try:
+            from omegaconf import OmegaConf
+
+            types = OmegaConf.to_container(OmegaConf.load(config)).get("questions", {}).get("types")
+        except (OSError, ValueError, AttributeError):
+            return None
+    return [str(t) for t in types] if types else None
+
+
 class VQARegistry:
     """VQA checkpoints by display name (loaded at start), and those that cannot be used, with why."""
 
     def __init__(self, paths=()):
         self.models: dict[str, object] = {}
         self.problems: list[tuple[str, str]] = []
+        self.types: dict[str, list[str] | None] = {}
         paths = [Path(p) for p in paths or ()]
         if not paths:
             return
@@ -56,7 +72,9 @@ class VQARegistry:
             return
         for p in paths:
             try:
-                self.models[p.name if p.name not in self.models else str(p)] = load_vqa(p)
+                name = p.name if p.name not in self.models else str(p)
+                self.models[name] = load_vqa(p)
+                self.types[name] = trained_types(self.models[name], p)
             except Exception as error:                        # noqa: BLE001 - listed, never fatal
                 log.warning("VQA checkpoint %s unusable: %s", p, error)
                 self.problems.append((str(p), f"{type(error).__name__}: {str(error)[:400]}"))
@@ -80,6 +98,14 @@ class VQARegistry:
         except Exception as error:                            # noqa: BLE001 - a broken model must not end the page
             log.exception("VQA %s failed", name)
             return f"the VQA {name} failed on this episode: {type(error).__name__}: {error}"
+
+    def unlearnt_type(self, name: str | None, question_type: str) -> str | None:
+        """A warning when VQA ``name`` never saw a question of ``question_type`` (its answer is a guess)."""
+        types = self.types.get(name) if name else None
+        if types is None or question_type in types:
+            return None
+        return (f"this VQA learnt from {', '.join(t.upper() for t in types)} questions only: its answer to a "
+                f"{question_type.upper()} question is a guess (train one with questions=all_types)")
 
     def status(self) -> str:
         if self.models:
