@@ -1,6 +1,6 @@
 """Serve the interactive web demo (Gradio) on this machine.
 
-    python recipes/demo.py                                  # http://127.0.0.1:7860
+    python recipes/demo.py                                  # http://127.0.0.1:7860, the shipped policies and VQA
     python recipes/demo.py runs=runs vqa=[runs/vqa/best] port=8080 max_pushes=5
     python recipes/demo.py host=0.0.0.0                     # reachable from the network: think first
 

@@ -16,7 +16,7 @@ import httpx
 import numpy as np
 import pytest
 import torch
-from demo_helpers import make_runs_folder, start_demo, stop_demo
+from demo_helpers import REWARD, make_runs_folder, start_demo, stop_demo
 from PIL import Image
 from torch_threads import one_torch_thread  # noqa: F401
 
@@ -251,3 +251,30 @@ def test_scene_filters_and_question_lists(served):
     assert {q.type for q in backend.questions.of_scene(scene_id)} == set(QUESTION_TYPES)
     with pytest.raises(ValueError, match="unknown level"):
         backend.catalog.select("extreme")
+
+
+def test_the_shipped_checkpoints_folder_offers_every_policy_and_the_students_learned_stop(small_dataset_dir):
+    """runs=checkpoints: the five shipped train_dqn runs, the student again with its fit_stop critic (matched by
+    the weights' fingerprint), and the VQA / encoder / recognition folders passed over, not listed as unusable;
+    the student with its stop plays an episode that ends with the stop action or the push budget."""
+    from mqa_rl.demo.policies import PolicyRegistry
+    from mqa_rl.envs.factory import make_mqa_env
+    from mqa_rl.modules.learned_stop import LearnedStop
+
+    root = Path(__file__).parents[1]
+    env = make_mqa_env(small_dataset_dir, REWARD, split=None, max_pushes=3)
+    try:
+        registry = PolicyRegistry(root / "checkpoints", env, max_pushes=3)
+        assert not registry.problems, registry.problems
+        trained = registry.trained
+        assert len([n for n in trained if "learned stop" not in n]) == 5
+        stopping = [n for n in trained if "learned stop" in n]
+        assert len(stopping) == 1 and "dqn_geometric_student" in stopping[0] and "stop_geometric_student" in stopping[0]
+        entry = registry.get(stopping[0])
+        assert isinstance(entry.actor, LearnedStop) and entry.max_pushes == 10 and entry.actor.max_pushes == 10
+        rollout = env.rollout(4, registry.make(stopping[0], seed=0), break_when_any_done=True)
+        actions_taken = rollout.get(keys.ACTION).reshape(-1).tolist()
+        assert all(0 <= a <= actions.STOP for a in actions_taken)
+        assert actions_taken[-1] == actions.STOP or len(actions_taken) == 3
+    finally:
+        env.close()

@@ -3,9 +3,11 @@
 Trained policies are ``recipes/train_dqn.py`` run folders (``config.yaml`` + ``checkpoints/``) in a
 configured folder (the folder itself, its subfolders and theirs). Each checkpoint is loaded once,
 when the server starts (``load_greedy``: weights checked against their SHA-256), and shared by all
-visitors (a greedy Q-network has no per-episode state). What cannot be used — a run without a
-checkpoint, a corrupt or foreign checkpoint, a stray weights file — is listed with the reason
-instead of stopping the server.
+visitors (a greedy Q-network has no per-episode state). A ``recipes/fit_stop.py`` folder found there
+adds its policy with the learned stop (matched by the weights' fingerprint, wherever the run lies).
+Other recipes' folders (a VQA, an encoder) are passed over. What cannot be used — a run without a
+checkpoint, a corrupt or foreign checkpoint, a stop critic whose policy is absent, a stray weights
+file — is listed with the reason instead of stopping the server.
 """
 
 from __future__ import annotations
@@ -14,8 +16,10 @@ import logging
 from dataclasses import dataclass
 from pathlib import Path
 
+import torch
 from omegaconf import OmegaConf
 
+from mqa_rl.modules.learned_stop import LearnedStop, StopCritic, policy_fingerprint, policy_net
 from mqa_rl.modules.random_policy import RandomMQAPolicy
 from mqa_rl.modules.trained_policy import load_greedy, run_checkpoints
 
@@ -24,6 +28,17 @@ RANDOM = "random (paper's baseline)"
 RANDOM_MASKED = "random inside the action mask"
 WEIGHT_SUFFIXES = (".pt", ".pth", ".ckpt", ".safetensors", ".bin")
 TRAIN_HINT = "train one with `python recipes/train_dqn.py out_dir=<runs folder>/<name>`"
+DQN_RUN_KEYS = {"reward", "env", "model"}       # what a train_dqn.py config.yaml has
+STOP_FIT_KEYS = {"critic", "run"}                               # what a fit_stop.py config.yaml has
+
+
+def is_mqa_model_file(path: Path) -> bool:
+    """Whether ``path`` is one of mqa_rl's tagged model files (``save_versioned``, the VQA): its format names it."""
+    try:
+        blob = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception:                                       # noqa: BLE001 - junk, or not a torch file
+        return False
+    return isinstance(blob, dict) and str(blob.get("format", "")).startswith("mqa_rl.")
 
 
 @dataclass
@@ -31,6 +46,7 @@ class PolicyEntry:
     name: str
     actor: object | None = None        # a greedy QValueActor; None for the random baselines
     masked: bool = False               # random baseline drawing inside the action mask
+    max_pushes: int | None = None      # the run's env.max_pushes (a learned stop's pushes feature is scaled by it)
 
     @property
     def is_q_network(self) -> bool:
@@ -46,8 +62,15 @@ class PolicyRegistry:
         self.entries: dict[str, PolicyEntry] = {RANDOM: PolicyEntry(RANDOM), RANDOM_MASKED: PolicyEntry(RANDOM_MASKED, masked=True)}
         self.problems: list[tuple[str, str]] = []         # (what, why it cannot be used)
         if self.runs_dir is not None and self.runs_dir.is_dir():
-            for run in self._run_folders():
-                self._load_run(run, env)
+            stops = []
+            for folder in self._run_folders():
+                kind = self._recipe_of(folder)
+                if kind == "train_dqn":
+                    self._load_run(folder, env)
+                elif kind == "fit_stop":
+                    stops.append(folder)
+            for folder in stops:
+                self._load_stop(folder)
             for stray in self._stray_files():
                 self.problems.append((str(stray), "a bare weights file, not a recipes/train_dqn.py run folder "
                                                   "(config.yaml + checkpoints/checkpoint-*/): the demo cannot "
@@ -60,10 +83,52 @@ class PolicyRegistry:
         return [p for p in levels if (p / "config.yaml").is_file()]
 
     def _stray_files(self) -> list[Path]:
+        """Weights files that look like a policy someone hoped to load; a recipe folder's own files (beside its
+        config.yaml) and mqa_rl's tagged model files (recognition, stop critic, encoder, VQA) are not."""
         found = []
         for folder in [self.runs_dir, *(p for p in self.runs_dir.iterdir() if p.is_dir())]:
-            found += [f for f in sorted(folder.iterdir()) if f.is_file() and f.suffix.lower() in WEIGHT_SUFFIXES]
+            if (folder / "config.yaml").is_file():
+                continue
+            found += [f for f in sorted(folder.iterdir())
+                      if f.is_file() and f.suffix.lower() in WEIGHT_SUFFIXES and not is_mqa_model_file(f)]
         return found
+
+    def _recipe_of(self, folder: Path) -> str | None:
+        """"train_dqn", "fit_stop", or None for another recipe's folder; an unreadable config.yaml is listed."""
+        try:
+            keys = set(OmegaConf.load(folder / "config.yaml").keys())
+        except Exception as error:                          # noqa: BLE001 - any unreadable yaml
+            self.problems.append((self._label(folder), f"config.yaml unreadable ({type(error).__name__}: {error})"))
+            return None
+        if DQN_RUN_KEYS <= keys:
+            return "train_dqn"
+        if STOP_FIT_KEYS <= keys and (folder / "stop_critic.pt").is_file():
+            return "fit_stop"
+        return None
+
+    def _load_stop(self, folder: Path) -> None:
+        """The policy whose weights ``folder``'s critic was fitted for, stopping as the critic predicts."""
+        label = self._label(folder)
+        try:
+            critic, meta = StopCritic.load(folder)
+        except (OSError, ValueError) as error:
+            self.problems.append((label, str(error)[:400]))
+            return
+        wanted = meta.get("policy_fingerprint")
+        found = False
+        for entry in [e for e in self.entries.values() if e.is_q_network]:
+            try:
+                if policy_fingerprint(policy_net(entry.actor)) != wanted:
+                    continue
+            except ValueError:                              # a network without the geometric maps a critic reads
+                continue
+            name = f"{entry.name} + learned stop · {label}"
+            self.entries[name] = PolicyEntry(name, actor=LearnedStop(entry.actor, critic, entry.max_pushes,
+                                                                     fingerprint=wanted), max_pushes=entry.max_pushes)
+            found = True
+        if not found:
+            self.problems.append((label, f"a stop critic fitted for the policy of {meta.get('run', '?')}, which is not "
+                                         f"among the loaded runs: put that run in `{self.runs_dir}`"))
 
     def _label(self, run: Path) -> str:
         rel = run.relative_to(self.runs_dir).as_posix() if run != self.runs_dir else run.name
@@ -75,6 +140,7 @@ class PolicyRegistry:
             cfg = OmegaConf.load(run / "config.yaml")
             reward = OmegaConf.select(cfg, "reward.name", default="?")
             size = OmegaConf.select(cfg, "env.image_size", default=None)
+            run_pushes = int(OmegaConf.select(cfg, "env.max_pushes", default=self.max_pushes))
         except Exception as error:                          # noqa: BLE001 - any unreadable yaml
             self.problems.append((label, f"config.yaml unreadable ({type(error).__name__}: {error})"))
             return
@@ -99,7 +165,7 @@ class PolicyRegistry:
                 self.problems.append((name, str(error)[:400]))
                 log.warning("policy %s unusable: %s", name, error)
                 continue
-            self.entries[name] = PolicyEntry(name, actor=actor)
+            self.entries[name] = PolicyEntry(name, actor=actor, max_pushes=run_pushes)
 
     # ------------------------------------------------------------------------------ use
     @property

@@ -104,7 +104,8 @@ class VQARegistry:
         types = self.types.get(name) if name else None
         if types is None or question_type in types:
             return None
-        return (f"this VQA learnt from {', '.join(t.upper() for t in types)} questions only: its answer to a "
+        article = "an" if question_type[:1].lower() in "aeiou" else "a"
+        return (f"this VQA learnt from {', '.join(t.upper() for t in types)} questions only: its answer to {article} "
                 f"{question_type.upper()} question is a guess (train one with questions=all_types)")
 
     def status(self) -> str:
