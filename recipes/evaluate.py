@@ -45,12 +45,21 @@ from mqa_rl.evaluation import answering as ans  # noqa: E402
 from mqa_rl.evaluation import answering_report as report  # noqa: E402
 from mqa_rl.modules.frozen_policies import resolve_checkpoint, system_spec  # noqa: E402
 from mqa_rl.modules.vqa import CHECKPOINT_NAME, load_vqa  # noqa: E402
+from mqa_rl.modules.vqa_ensemble import VQAEnsemble  # noqa: E402
 from mqa_rl.training.vqa_data import IMAGE_KEYS, RECORD_KEYS  # noqa: E402
 
 EVAL_KEYS = (*RECORD_KEYS, *IMAGE_KEYS, keys.EPISODE_TARGETS, (keys.FIRST, keys.FRAME_VISIBLE),
              (keys.LAST, keys.FRAME_VISIBLE))
 # what the calibrated counter reads from the training rollouts
 COUNT_KEYS = (keys.TYPE_LABEL, keys.LEVEL, keys.ANSWER_LABEL, keys.EPISODE_TARGETS, (keys.LAST, keys.FRAME_VISIBLE))
+
+
+def vqa_dirs(cfg: DictConfig) -> list[str]:
+    """``vqa_dir``: one folder of train_vqa.py runs, or a list of them (seeds) whose VQAs answer together."""
+    dirs = cfg.vqa_dir if OmegaConf.is_list(cfg.vqa_dir) else [cfg.vqa_dir]
+    if not dirs:
+        raise ValueError("vqa_dir=[] names no VQA folder: give one folder, or a list of seeds' folders")
+    return [str(d) for d in dirs]
 
 
 def missing(reason: str, command: str) -> dict:
@@ -67,11 +76,12 @@ def evaluate_system(cfg: DictConfig, ds: MQADataset, name: str, plan_sha: str) -
         return missing(f"no trained policy in {spec['run']}",
                        f"python recipes/train_dqn.py reward=<variant> out_dir={spec['run']}"), None, None
     store = Path(cfg.rollouts_dir) / name / "test"
-    vqa_path = Path(cfg.vqa_dir) / name / CHECKPOINT_NAME
+    vqa_paths = [Path(d) / name / CHECKPOINT_NAME for d in vqa_dirs(cfg)]
     train_cmd = (f"python recipes/collect_rollouts.py system={name} questions={q} && "
                  f"python recipes/train_vqa.py system={name} questions={q} vqa={v}")
-    if not vqa_path.exists():
-        return missing(f"no VQA at {vqa_path}", train_cmd), None, None
+    absent = [p for p in vqa_paths if not p.exists()]
+    if absent:
+        return missing(f"no VQA at {absent[0]}", train_cmd), None, None
     t0 = time.perf_counter()
     try:
         records = load_records(store, EVAL_KEYS)
@@ -89,16 +99,20 @@ def evaluate_system(cfg: DictConfig, ds: MQADataset, name: str, plan_sha: str) -
     if read_meta(store)["policy"] != spec:
         warnings.warn(f"{store} was collected with policy {read_meta(store)['policy']}, the config now says {spec}",
                       stacklevel=2)
-    model = load_vqa(vqa_path)
+    model = load_vqa(vqa_paths[0]) if len(vqa_paths) == 1 else VQAEnsemble.load(vqa_paths)
     model.check_dataset(ds)
-    if model.meta.get("system") not in (None, name):
-        warnings.warn(f"{vqa_path} was trained on the rollouts of {model.meta['system']!r}, not {name!r}", stacklevel=2)
+    members = model.meta.get("members", [model.meta])
+    for path, meta in zip(vqa_paths, members):
+        if meta.get("system") not in (None, name):
+            warnings.warn(f"{path} was trained on the rollouts of {meta['system']!r}, not {name!r}", stacklevel=2)
     t1 = time.perf_counter()
     right = ans.predict(model, records, cfg.batch_size) == records.get(keys.ANSWER_LABEL)
     counting = records.get(keys.TYPE_LABEL) == QUESTION_TYPES.index("counting")
     sub = records[counting]
-    result = {"status": "ok", "episodes": records.shape[0], "vqa": str(vqa_path), "rollouts": str(store),
-              "policy_spec": spec, "vqa_meta": {k: model.meta.get(k) for k in ("step", "train_episodes", "val_episodes")},
+    vqa_meta = [{k: meta.get(k) for k in ("step", "train_episodes", "val_episodes")} for meta in members]
+    result = {"status": "ok", "episodes": records.shape[0], "rollouts": str(store), "policy_spec": spec,
+              "vqa": str(vqa_paths[0]) if len(vqa_paths) == 1 else [str(p) for p in vqa_paths],
+              "vqa_meta": vqa_meta[0] if len(vqa_meta) == 1 else vqa_meta,
               "accuracy": ans.accuracy_table(right, records),
               "counter_first": ans.accuracy_table(ans.counter_right(sub, ds.answers, keys.FIRST), sub),
               "counter_last": ans.accuracy_table(ans.counter_right(sub, ds.answers, keys.LAST), sub),

@@ -106,6 +106,34 @@ def test_evaluate_writes_table3_and_names_what_is_missing(small_dataset, trained
     assert json.loads((out / "results.json").read_text())["systems"]["random"]["episodes"] == 4
 
 
+def test_evaluate_answers_with_the_mean_of_several_vqa_seeds(small_dataset, trained):
+    """vqa_dir=[a, b]: every record answered by the argmax of the two VQAs' mean probabilities; a VQA of another
+    vocabulary cannot join the ensemble."""
+    from mqa_rl.modules.vqa import load_vqa
+    from mqa_rl.modules.vqa_ensemble import VQAEnsemble
+    from mqa_rl.training.vqa_data import load_answering_records
+
+    root, overrides = trained
+    load_recipe("train_vqa").train(compose_recipe_config("train_vqa", [
+        *overrides, "system=random", "encoder.weights=null", "encoder.freeze=false", "train.steps=3", "train.batch_size=4",
+        "train.eval_interval=3", "logger.wandb=false", "logger.progress=false", "seed=1", f"out_dir={root / 'vqa_s1' / 'random'}"]))
+    dirs = [root / "vqa" / "counting-eqa", root / "vqa_s1"]
+    results = load_recipe("evaluate").evaluate(compose_recipe_config("evaluate", [
+        *overrides, "progress=false", "report=[random]", f"vqa_dir=[{dirs[0]},{dirs[1]}]", f"out_dir={root / 'report_ens'}"]))
+    res = results["systems"]["random"]
+    assert res["vqa"] == [str(d / "random" / "vqa.pt") for d in dirs] and len(res["vqa_meta"]) == 2
+    records = load_answering_records(root / "rollouts" / "counting" / "random" / "test")
+    members = [load_vqa(d / "random") for d in dirs]
+    first, last = (records.get(k).permute(0, 2, 3, 1) for k in (keys.FIRST_RGB, keys.LAST_RGB))
+    probs = [m.answer_probs(records.get(keys.QUESTION), first, last) for m in members]
+    ensemble = VQAEnsemble(members).answer_probs(records.get(keys.QUESTION), first, last)
+    assert torch.allclose(ensemble, (probs[0] + probs[1]) / 2) and not torch.allclose(probs[0], probs[1])
+    right = (ensemble.argmax(-1) == records.get(keys.ANSWER_LABEL)).float()
+    assert res["accuracy"]["counting"]["all"]["accuracy"] == pytest.approx(float(right.mean()))
+    with pytest.raises(ValueError, match="different question or answer vocabularies"):
+        VQAEnsemble([members[0], VQAModel(["<pad>", "<unk>", "how", "many"], small_dataset.answers)])
+
+
 def test_evaluate_refuses_a_vqa_of_another_vocabulary(small_dataset, trained):
     root, overrides = trained
     other = VQAModel(["<pad>", "<unk>", "how", "many"], small_dataset.answers)

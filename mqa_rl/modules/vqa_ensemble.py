@@ -1,0 +1,47 @@
+"""Several VQAs of one system (training seeds) answering as one: the mean of their answer probabilities.
+
+Why: with ~1,200 training episodes a VQA's seed moves a Table III cell by up to 0.16 (README, "Two VQA seeds"),
+more than any difference between policies; averaging the seeds' probabilities answers with less of that noise
+and costs only the extra forward passes. ``recipes/evaluate.py 'vqa_dir=[seed0_dir, seed1_dir]'`` uses it.
+It honours the public contract of ``mqa_rl.modules.vqa`` (``answer_probs``, ``answers``, ``tokenize``,
+``check_dataset``, ``meta``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import torch
+
+from mqa_rl.modules.vqa import VQAModel, load_vqa
+
+
+class VQAEnsemble:
+    """``members``: VQAs with the same question and answer vocabularies (ValueError otherwise)."""
+
+    def __init__(self, members: list[VQAModel]):
+        if not members:
+            raise ValueError("a VQA ensemble needs at least one member")
+        first = members[0]
+        for model in members[1:]:
+            if list(model.vocab) != list(first.vocab) or list(model.answers) != list(first.answers):
+                raise ValueError("the ensemble's VQAs were trained with different question or answer vocabularies: "
+                                 "give VQAs trained on the same dataset")
+        self.members = list(members)
+        self.answers, self.vocab = list(first.answers), list(first.vocab)
+        self.meta = {**first.meta, "members": [m.meta for m in members]}
+
+    @classmethod
+    def load(cls, paths: list[str | Path]) -> "VQAEnsemble":
+        """The VQAs saved at ``paths`` (each as ``load_vqa`` reads it, with its errors)."""
+        return cls([load_vqa(p) for p in paths])
+
+    def tokenize(self, texts) -> torch.Tensor:
+        return self.members[0].tokenize(texts)
+
+    def check_dataset(self, dataset) -> None:
+        self.members[0].check_dataset(dataset)
+
+    def answer_probs(self, question_tokens: torch.Tensor, first_rgb: torch.Tensor, last_rgb: torch.Tensor) -> torch.Tensor:
+        """P(answer) [B, len(answers)]: the members' probabilities averaged."""
+        return torch.stack([m.answer_probs(question_tokens, first_rgb, last_rgb) for m in self.members]).mean(0)
