@@ -49,7 +49,7 @@ def trained_types(model, path: Path) -> list[str] | None:
             from omegaconf import OmegaConf
 
             types = OmegaConf.to_container(OmegaConf.load(config)).get("questions", {}).get("types")
-        except (OSError, ValueError, AttributeError):
+        except Exception:                                 # noqa: BLE001 - no readable record: no warning, still usable
             return None
     return [str(t) for t in types] if types else None
 
