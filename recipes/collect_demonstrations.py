@@ -29,6 +29,7 @@ from mqa_rl.collectors.demonstrations import DEMOS_META, collect_demonstrations
 from mqa_rl.data.dataset import dataset_fingerprint
 from mqa_rl.envs import actions
 from mqa_rl.envs.sapien_bin import SapienBinEnv
+from mqa_rl.modules.frozen_policies import StopMargin
 from mqa_rl.modules.trained_policy import load_greedy
 
 def collect(cfg: DictConfig) -> dict:
@@ -42,7 +43,11 @@ def collect(cfg: DictConfig) -> dict:
     learner = None
     if cfg.learner.run:                        # DAgger: the learner acts, the oracle labels
         learner, _, path = load_greedy(cfg.learner.run, cfg.learner.checkpoint, env)
-        print(f"DAgger: {cfg.learner.share:.0%} of the actions by the greedy policy of {path}")
+        margin = cfg.learner.get("stop_margin")
+        if margin is not None:
+            learner = StopMargin(learner, float(margin))
+        print(f"DAgger: {cfg.learner.share:.0%} of the actions by the greedy policy of {path}"
+              + (f", stopping only by a Q margin of {float(margin)}" if margin is not None else ""))
     t0 = time.perf_counter()
     demos = collect_demonstrations(env, cfg.states, progress=cfg.progress, learner=learner,
                                    learner_share=float(cfg.learner.share) if learner is not None else 0.0,

@@ -274,9 +274,10 @@ def test_pretrain_then_train_dqn_from_the_recognition_file(small_dataset_dir, tm
     dagger = tmp_path / "dagger"
     out = subprocess.run([sys.executable, str(ROOT / "recipes" / "collect_demonstrations.py"), f"dataset={small_dataset_dir}",
                           f"out_dir={dagger}", "states=4", "progress=false", "env.max_pushes=3", f"learner.run={run}",
-                          "oracle.order=visible_first", "oracle.image_visible=true"],
+                          "learner.stop_margin=inf", "oracle.order=visible_first", "oracle.image_visible=true"],
                          capture_output=True, text=True, timeout=600, env=ENV, cwd=tmp_path)
     assert out.returncode == 0 and "DAgger: 50%" in out.stdout and "4 demonstrations" in out.stdout, out.stderr[-3000:]
+    assert "stopping only by a Q margin of inf" in out.stdout              # its later pushes get labels too
     # the frozen recognition is unchanged by DQN training, and the trained policy loads for evaluation
     from mqa_rl.envs.sapien_bin import SapienBinEnv
     from mqa_rl.modules.trained_policy import load_greedy
