@@ -2,7 +2,7 @@
 
 The paper fills a bin with up to 50 everyday objects and asks questions about them
 ("How many cans are there in the bin?").  Instead of relying on scanned assets we build
-every object from a handful of ``trimesh.creation``-style primitives:
+every object from a handful of primitive shape families (``mqa_rl.data.object_parts``):
 
 * Every object is a union of *convex* parts.  Each part is used both as the visual
   mesh and as a convex collision shape, so what the camera sees is exactly what the
@@ -28,21 +28,33 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import trimesh
 
+from mqa_rl.data.object_parts import (
+    RGBA,
+    Part,
+    STEEL,
+    DARK_STEEL,
+    RUBBER,
+    BROWN,
+    LEAF_GREEN,
+    WHITE,
+    GLASS,
+    blob,
+    box,
+    cylinder,
+    ellipsoid,
+    hull_part,
+    lathe,
+    lathe_points,
+    pose,
+    prism,
+    rgb,
+    ring,
+    rounded_box,
+)
 from mqa_rl.data.object_sizes import REAL_LENGTH
 
-RGBA = tuple[float, float, float, float]
-
 INSTANCES_PER_CLASS = 3
-
-
-@dataclass(frozen=True)
-class Part:
-    """One convex piece of an object: collision shape and visual at once."""
-
-    mesh: trimesh.Trimesh  # convex, watertight, in the object's frame, metres
-    color: RGBA  # RGBA in 0..1
 
 
 @dataclass(frozen=True)
@@ -80,172 +92,6 @@ class ObjectModel:
 
 
 # --------------------------------------------------------------------------------------
-# Colours
-# --------------------------------------------------------------------------------------
-
-
-def _rgb(hex_code: str) -> RGBA:
-    """Opaque RGBA from a ``#rrggbb`` string; hex keeps the tables short and readable."""
-    value = hex_code.lstrip("#")
-    red, green, blue = (int(value[i : i + 2], 16) / 255.0 for i in (0, 2, 4))
-    return (red, green, blue, 1.0)
-
-
-STEEL = _rgb("#aab2bd")
-DARK_STEEL = _rgb("#6c757d")
-RUBBER = _rgb("#1c1c1c")
-BROWN = _rgb("#5c3d1e")
-LEAF_GREEN = _rgb("#4f9d2d")
-WHITE = _rgb("#f4f4f0")
-GLASS = _rgb("#9cc9dd")
-
-# --------------------------------------------------------------------------------------
-# Primitive shape families.  Each helper returns point clouds positioned in the object's
-# frame, and ``_hull_part`` turns a point cloud into a convex, watertight part.  Working
-# with points (rather than primitive meshes) lets one helper cover a whole family, e.g.
-# cylinders, frustums and tapered handles.
-# --------------------------------------------------------------------------------------
-
-# A helper builds its shape along local z; these column orders rotate local z onto the
-# requested world axis (cyclic permutations, hence proper rotations).
-_AXIS_COLUMNS = {"z": [0, 1, 2], "x": [2, 0, 1], "y": [1, 2, 0]}
-
-
-def _pose(points: np.ndarray, center: Sequence[float] = (0.0, 0.0, 0.0), axis: str = "z") -> np.ndarray:
-    """Rotate a shape built along local z onto world ``axis``, then move it to ``center``."""
-    points = np.asarray(points, dtype=np.float64)[:, _AXIS_COLUMNS[axis]]
-    return points + np.asarray(center, dtype=np.float64)
-
-
-def _hull_part(points: np.ndarray, color: RGBA) -> Part:
-    """Convex hull of a point cloud as a part (convex and watertight by construction)."""
-    mesh = trimesh.convex.convex_hull(np.asarray(points, dtype=np.float64))
-    return Part(mesh=mesh, color=color)
-
-
-def _box(size: Sequence[float], color: RGBA, center=(0.0, 0.0, 0.0)) -> Part:
-    """Rectangular block (book boards, labels, car body)."""
-    corners = np.array(np.meshgrid([-0.5, 0.5], [-0.5, 0.5], [-0.5, 0.5])).reshape(3, -1).T
-    return _hull_part(_pose(corners * np.asarray(size), center), color)
-
-
-def _rounded_box(
-    size: Sequence[float],
-    corner_radius: float,
-    color: RGBA,
-    center=(0.0, 0.0, 0.0),
-    taper: float = 1.0,
-) -> Part:
-    """Block with rounded vertical edges (remotes, sponges); ``taper`` shrinks the top face."""
-    length, width, height = size
-    radius = min(corner_radius, 0.5 * min(length, width) - 1e-4)
-    angles = np.linspace(0.0, 0.5 * np.pi, 5)
-    arc = radius * np.stack([np.cos(angles), np.sin(angles)], axis=1)
-    outline = []
-    for sign_x, sign_y in ((1, 1), (-1, 1), (-1, -1), (1, -1)):
-        corner = np.array([sign_x * (0.5 * length - radius), sign_y * (0.5 * width - radius)])
-        outline.append(corner + arc * [sign_x, sign_y])
-    outline = np.concatenate(outline)
-    bottom = np.column_stack([outline, np.full(len(outline), -0.5 * height)])
-    top = np.column_stack([outline * taper, np.full(len(outline), 0.5 * height)])
-    return _hull_part(_pose(np.vstack([bottom, top]), center), color)
-
-
-def _lathe_points(stations: Sequence[tuple[float, float]], sections: int = 20) -> np.ndarray:
-    """Circles of the given (position along z, radius) stations; their hull is a solid of revolution."""
-    angles = np.linspace(0.0, 2.0 * np.pi, sections, endpoint=False)
-    circle = np.stack([np.cos(angles), np.sin(angles)], axis=1)
-    return np.vstack([np.column_stack([radius * circle, np.full(sections, z)]) for z, radius in stations])
-
-
-def _lathe(
-    stations: Sequence[tuple[float, float]],
-    color: RGBA,
-    center=(0.0, 0.0, 0.0),
-    axis: str = "z",
-    sections: int = 20,
-) -> Part:
-    """Convex solid of revolution along ``axis`` (bottle shoulder, tapered shafts).
-
-    The radius profile must be concave for the hull to match it, which holds for the
-    cylinders, frustums and tapers used here.
-    """
-    return _hull_part(_pose(_lathe_points(stations, sections), center, axis), color)
-
-
-def _cylinder(
-    radius: float,
-    length: float,
-    color: RGBA,
-    center=(0.0, 0.0, 0.0),
-    axis: str = "z",
-    end_radius: float | None = None,
-    sections: int = 20,
-) -> Part:
-    """Cylinder along ``axis``; with ``end_radius`` a frustum whose +axis end has that radius."""
-    end_radius = radius if end_radius is None else end_radius
-    return _lathe([(-0.5 * length, radius), (0.5 * length, end_radius)], color, center, axis, sections)
-
-
-def _ellipsoid_points(radii: Sequence[float], center=(0.0, 0.0, 0.0), subdivisions: int = 2) -> np.ndarray:
-    sphere = trimesh.creation.icosphere(subdivisions=subdivisions).vertices
-    return sphere * np.asarray(radii, dtype=np.float64) + np.asarray(center, dtype=np.float64)
-
-
-def _ellipsoid(radii: Sequence[float], color: RGBA, center=(0.0, 0.0, 0.0)) -> Part:
-    """Ellipsoid (balls, apples, duck body)."""
-    return _hull_part(_ellipsoid_points(radii, center), color)
-
-
-def _blob(ends: Sequence[tuple[Sequence[float], Sequence[float]]], color: RGBA) -> Part:
-    """Hull of several (center, radii) ellipsoids: capsules, tapered limbs, fruit segments."""
-    points = [_ellipsoid_points(radii, center, subdivisions=1) for center, radii in ends]
-    return _hull_part(np.vstack(points), color)
-
-
-def _ring(
-    radii: Sequence[float],
-    band: float,
-    thickness: float,
-    color: RGBA,
-    center=(0.0, 0.0, 0.0),
-    axis: str = "z",
-    arc: tuple[float, float] = (0.0, 2.0 * np.pi),
-    pieces: int = 4,
-) -> list[Part]:
-    """(Elliptic) annulus arc split into ``pieces`` convex sectors: loops, handles, shackles.
-
-    The ring lies in the plane normal to ``axis``; ``radii`` are its outer half-axes and
-    ``arc`` the covered angle range in that plane's local (u, v) coordinates.
-    """
-    outer = np.asarray(radii, dtype=np.float64)
-    inner = outer - band
-    bounds = np.linspace(arc[0], arc[1], pieces + 1)
-    parts = []
-    for start, stop in zip(bounds[:-1], bounds[1:]):
-        angles = np.linspace(start, stop, 4)
-        direction = np.stack([np.cos(angles), np.sin(angles)], axis=1)
-        outline = np.vstack([direction * outer, direction * inner])
-        points = np.vstack(
-            [
-                np.column_stack([outline, np.full(len(outline), -0.5 * thickness)]),
-                np.column_stack([outline, np.full(len(outline), 0.5 * thickness)]),
-            ]
-        )
-        parts.append(_hull_part(_pose(points, center, axis), color))
-    return parts
-
-
-def _prism(outline: Sequence[Sequence[float]], z_range: tuple[float, float], color: RGBA) -> Part:
-    """Vertical extrusion of a 2-D outline (its convex hull is used): blades, wedges."""
-    outline = np.asarray(outline, dtype=np.float64)
-    points = np.vstack(
-        [np.column_stack([outline, np.full(len(outline), z)]) for z in z_range]
-    )
-    return _hull_part(points, color)
-
-
-# --------------------------------------------------------------------------------------
 # Object classes.  Each builder takes one row of its parameter table and returns the parts
 # in an arbitrary frame (usually resting on z = 0); ``make_object`` re-centres them.
 # Small "decal" parts (labels, buttons) stick out 1-2 mm so that they are visible and do
@@ -253,9 +99,9 @@ def _prism(outline: Sequence[Sequence[float]], z_range: tuple[float, float], col
 # --------------------------------------------------------------------------------------
 
 _CAN = (
-    dict(radius=0.033, height=0.115, body=_rgb("#c8102e")),  # 330 ml soda
-    dict(radius=0.027, height=0.135, body=_rgb("#1f4fa8")),  # slim energy drink
-    dict(radius=0.037, height=0.080, body=_rgb("#2e8b57")),  # short, wide food can
+    dict(radius=0.033, height=0.115, body=rgb("#c8102e")),  # 330 ml soda
+    dict(radius=0.027, height=0.135, body=rgb("#1f4fa8")),  # slim energy drink
+    dict(radius=0.037, height=0.080, body=rgb("#2e8b57")),  # short, wide food can
 )
 
 
@@ -263,16 +109,16 @@ def _can(radius: float, height: float, body: RGBA) -> list[Part]:
     """Upright drink can: coloured body with inset silver lid and base."""
     lid_radius, lid_height = 0.86 * radius, 0.008
     return [
-        _cylinder(radius, height - 0.008, body, center=(0, 0, 0.5 * height), sections=24),
-        _cylinder(lid_radius, lid_height, STEEL, center=(0, 0, height - 0.5 * lid_height), sections=24),
-        _cylinder(lid_radius, lid_height, STEEL, center=(0, 0, 0.5 * lid_height), sections=24),
+        cylinder(radius, height - 0.008, body, center=(0, 0, 0.5 * height), sections=24),
+        cylinder(lid_radius, lid_height, STEEL, center=(0, 0, height - 0.5 * lid_height), sections=24),
+        cylinder(lid_radius, lid_height, STEEL, center=(0, 0, 0.5 * lid_height), sections=24),
     ]
 
 
 _FOOD_BOX = (
-    dict(size=(0.140, 0.095, 0.040), body=_rgb("#f28c28"), label=_rgb("#fff4d6"), logo=_rgb("#d62828")),  # cereal
-    dict(size=(0.120, 0.065, 0.050), body=_rgb("#e85d04"), label=_rgb("#ffe066"), logo=_rgb("#1d3557")),  # pasta
-    dict(size=(0.095, 0.085, 0.035), body=_rgb("#ffa62b"), label=_rgb("#ffffff"), logo=_rgb("#2a9d8f")),  # tea
+    dict(size=(0.140, 0.095, 0.040), body=rgb("#f28c28"), label=rgb("#fff4d6"), logo=rgb("#d62828")),  # cereal
+    dict(size=(0.120, 0.065, 0.050), body=rgb("#e85d04"), label=rgb("#ffe066"), logo=rgb("#1d3557")),  # pasta
+    dict(size=(0.095, 0.085, 0.035), body=rgb("#ffa62b"), label=rgb("#ffffff"), logo=rgb("#2a9d8f")),  # tea
 )
 
 
@@ -285,17 +131,17 @@ def _food_box(size: Sequence[float], body: RGBA, label: RGBA, logo: RGBA) -> lis
     label_size = (0.55 * length, 0.75 * width, 0.004)
     face = 0.5 * height
     return [
-        _box(size, body),
-        _box(label_size, label, center=(-0.12 * length, 0, face - 0.001)),
-        _box(label_size, label, center=(-0.12 * length, 0, -face + 0.001)),
-        _cylinder(0.18 * width, 0.004, logo, center=(0.30 * length, 0, face)),
+        box(size, body),
+        box(label_size, label, center=(-0.12 * length, 0, face - 0.001)),
+        box(label_size, label, center=(-0.12 * length, 0, -face + 0.001)),
+        cylinder(0.18 * width, 0.004, logo, center=(0.30 * length, 0, face)),
     ]
 
 
 _BOOK = (
-    dict(size=(0.120, 0.090, 0.020), cover=_rgb("#1d3557"), pages=_rgb("#f1e9d2"), title=_rgb("#e9c46a")),
-    dict(size=(0.140, 0.100, 0.028), cover=_rgb("#7b1e28"), pages=_rgb("#efe6cf"), title=_rgb("#f1faee")),
-    dict(size=(0.105, 0.075, 0.016), cover=_rgb("#4a2c6d"), pages=_rgb("#f4ecd8"), title=_rgb("#ffd166")),
+    dict(size=(0.120, 0.090, 0.020), cover=rgb("#1d3557"), pages=rgb("#f1e9d2"), title=rgb("#e9c46a")),
+    dict(size=(0.140, 0.100, 0.028), cover=rgb("#7b1e28"), pages=rgb("#efe6cf"), title=rgb("#f1faee")),
+    dict(size=(0.105, 0.075, 0.016), cover=rgb("#4a2c6d"), pages=rgb("#f4ecd8"), title=rgb("#ffd166")),
 )
 
 
@@ -305,19 +151,19 @@ def _book(size: Sequence[float], cover: RGBA, pages: RGBA, title: RGBA) -> list[
     board, overhang = 0.003, 0.002
     top = 0.5 * height - 0.5 * board
     return [
-        _box((length - 2 * overhang, width - board - overhang, height - 2 * board), pages,
+        box((length - 2 * overhang, width - board - overhang, height - 2 * board), pages,
              center=(0, 0.5 * (board - overhang), 0)),
-        _box((length, width, board), cover, center=(0, 0, top)),
-        _box((length, width, board), cover, center=(0, 0, -top)),
-        _box((length, board, height), cover, center=(0, -0.5 * width + 0.5 * board, 0)),
-        _box((0.45 * length, 0.5 * width, board + 0.002), title, center=(0.18 * length, 0.05 * width, top)),
+        box((length, width, board), cover, center=(0, 0, top)),
+        box((length, width, board), cover, center=(0, 0, -top)),
+        box((length, board, height), cover, center=(0, -0.5 * width + 0.5 * board, 0)),
+        box((0.45 * length, 0.5 * width, board + 0.002), title, center=(0.18 * length, 0.05 * width, top)),
     ]
 
 
 _SCISSORS = (
-    dict(blade_length=0.085, loop_radii=(0.023, 0.013), handle=_rgb("#f77f00")),  # office scissors
-    dict(blade_length=0.070, loop_radii=(0.019, 0.012), handle=_rgb("#2b2d42")),  # general purpose
-    dict(blade_length=0.050, loop_radii=(0.016, 0.015), handle=_rgb("#7b2cbf")),  # kids' scissors
+    dict(blade_length=0.085, loop_radii=(0.023, 0.013), handle=rgb("#f77f00")),  # office scissors
+    dict(blade_length=0.070, loop_radii=(0.019, 0.012), handle=rgb("#2b2d42")),  # general purpose
+    dict(blade_length=0.050, loop_radii=(0.016, 0.015), handle=rgb("#7b2cbf")),  # kids' scissors
 )
 
 
@@ -337,21 +183,21 @@ def _scissors(blade_length: float, loop_radii: Sequence[float], handle: RGBA) ->
             (0.0, 0.0065), (0.0, -0.0065),
             (blade_length, -side * 0.0005), (blade_length, -side * 0.0030),
         ]
-        parts.append(_prism(outline, z_range, STEEL))
-        parts += _ring(loop_radii, band, thickness, handle, center=(loop_x, side * loop_y, 0.006))
+        parts.append(prism(outline, z_range, STEEL))
+        parts += ring(loop_radii, band, thickness, handle, center=(loop_x, side * loop_y, 0.006))
     return parts
 
 
 _GAMEPAD = (
-    dict(size=(0.100, 0.052, 0.024), body=_rgb("#eeeeee"), sticks=_rgb("#3a3a3a")),
-    dict(size=(0.094, 0.048, 0.022), body=_rgb("#2b2b2b"), sticks=_rgb("#6b6b6b")),
-    dict(size=(0.088, 0.050, 0.026), body=_rgb("#3f5fbf"), sticks=_rgb("#1c1c1c")),
+    dict(size=(0.100, 0.052, 0.024), body=rgb("#eeeeee"), sticks=rgb("#3a3a3a")),
+    dict(size=(0.094, 0.048, 0.022), body=rgb("#2b2b2b"), sticks=rgb("#6b6b6b")),
+    dict(size=(0.088, 0.050, 0.026), body=rgb("#3f5fbf"), sticks=rgb("#1c1c1c")),
 )
 _FACE_BUTTONS = (  # (dx, dy, colour) around the button cluster, like an Xbox pad
-    (0.0, 1.0, _rgb("#ffd60a")),
-    (1.0, 0.0, _rgb("#e63946")),
-    (0.0, -1.0, _rgb("#2dc653")),
-    (-1.0, 0.0, _rgb("#3a86ff")),
+    (0.0, 1.0, rgb("#ffd60a")),
+    (1.0, 0.0, rgb("#e63946")),
+    (0.0, -1.0, rgb("#2dc653")),
+    (-1.0, 0.0, rgb("#3a86ff")),
 )
 
 
@@ -359,30 +205,30 @@ def _gamepad(size: Sequence[float], body: RGBA, sticks: RGBA) -> list[Part]:
     """Game controller lying face up: body, two grips, two sticks, d-pad and four buttons."""
     length, width, height = size
     grip_radius = (0.17 * length, 0.17 * length, 0.5 * height)
-    parts = [_rounded_box(size, 0.012, body, center=(0, 0, 0.5 * height), taper=0.96)]
+    parts = [rounded_box(size, 0.012, body, center=(0, 0, 0.5 * height), taper=0.96)]
     for side in (-1.0, 1.0):
-        parts.append(_blob([
+        parts.append(blob([
             ((side * 0.33 * length, 0.0, 0.5 * height), grip_radius),
             ((side * 0.44 * length, -0.70 * width, 0.5 * height), grip_radius),
         ], body))
     stick_radius = 0.085 * length
-    parts.append(_cylinder(stick_radius, 0.008, sticks, center=(-0.30 * length, 0.10 * width, height + 0.003)))
-    parts.append(_cylinder(stick_radius, 0.008, sticks, center=(0.15 * length, -0.25 * width, height + 0.003)))
+    parts.append(cylinder(stick_radius, 0.008, sticks, center=(-0.30 * length, 0.10 * width, height + 0.003)))
+    parts.append(cylinder(stick_radius, 0.008, sticks, center=(0.15 * length, -0.25 * width, height + 0.003)))
     dpad_center = (-0.15 * length, -0.25 * width, height)
     dpad_arm = 0.17 * length
-    parts.append(_box((dpad_arm, 0.06 * length, 0.006), sticks, center=dpad_center))
-    parts.append(_box((0.06 * length, dpad_arm, 0.006), sticks, center=dpad_center))
+    parts.append(box((dpad_arm, 0.06 * length, 0.006), sticks, center=dpad_center))
+    parts.append(box((0.06 * length, dpad_arm, 0.006), sticks, center=dpad_center))
     spacing = 0.075 * length
     for dx, dy, color in _FACE_BUTTONS:
         center = (0.30 * length + dx * spacing, 0.10 * width + dy * spacing, height)
-        parts.append(_cylinder(0.032 * length, 0.006, color, center=center, sections=16))
+        parts.append(cylinder(0.032 * length, 0.006, color, center=center, sections=16))
     return parts
 
 
 _BOTTLE = (
-    dict(radius=0.028, body_length=0.085, body=_rgb("#a8dadc"), label=_rgb("#1d70b8"), cap=_rgb("#f8f9fa")),
-    dict(radius=0.025, body_length=0.090, body=_rgb("#b7e4c7"), label=_rgb("#d62828"), cap=_rgb("#2d6a4f")),
-    dict(radius=0.032, body_length=0.072, body=_rgb("#cde8f6"), label=_rgb("#f4a261"), cap=_rgb("#e63946")),
+    dict(radius=0.028, body_length=0.085, body=rgb("#a8dadc"), label=rgb("#1d70b8"), cap=rgb("#f8f9fa")),
+    dict(radius=0.025, body_length=0.090, body=rgb("#b7e4c7"), label=rgb("#d62828"), cap=rgb("#2d6a4f")),
+    dict(radius=0.032, body_length=0.072, body=rgb("#cde8f6"), label=rgb("#f4a261"), cap=rgb("#e63946")),
 )
 
 
@@ -392,21 +238,21 @@ def _bottle(radius: float, body_length: float, body: RGBA, label: RGBA, cap: RGB
     neck_end = body_length + shoulder_length + neck_length
     label_start, label_end = 0.25 * body_length, 0.75 * body_length
     return [
-        _cylinder(radius, label_start, body, center=(0.5 * label_start, 0, 0), axis="x"),
-        _cylinder(radius + 0.001, label_end - label_start, label, center=(0.5 * (label_start + label_end), 0, 0),
+        cylinder(radius, label_start, body, center=(0.5 * label_start, 0, 0), axis="x"),
+        cylinder(radius + 0.001, label_end - label_start, label, center=(0.5 * (label_start + label_end), 0, 0),
                   axis="x"),
-        _cylinder(radius, body_length - label_end, body, center=(0.5 * (label_end + body_length), 0, 0), axis="x"),
-        _lathe([(body_length - 0.002, radius), (body_length + shoulder_length, neck_radius),
+        cylinder(radius, body_length - label_end, body, center=(0.5 * (label_end + body_length), 0, 0), axis="x"),
+        lathe([(body_length - 0.002, radius), (body_length + shoulder_length, neck_radius),
                (neck_end, neck_radius)], body, axis="x"),
-        _cylinder(neck_radius + 0.0025, cap_length, cap, center=(neck_end - 0.004 + 0.5 * cap_length, 0, 0),
+        cylinder(neck_radius + 0.0025, cap_length, cap, center=(neck_end - 0.004 + 0.5 * cap_length, 0, 0),
                   axis="x", sections=16),
     ]
 
 
 _MUG = (
-    dict(radius=0.040, height=0.090, body=_rgb("#f8f9fa"), glaze=_rgb("#c1121f")),
-    dict(radius=0.036, height=0.100, body=_rgb("#fdf0d5"), glaze=_rgb("#1d4e89")),
-    dict(radius=0.043, height=0.078, body=_rgb("#e9ecef"), glaze=_rgb("#2a9d8f")),
+    dict(radius=0.040, height=0.090, body=rgb("#f8f9fa"), glaze=rgb("#c1121f")),
+    dict(radius=0.036, height=0.100, body=rgb("#fdf0d5"), glaze=rgb("#1d4e89")),
+    dict(radius=0.043, height=0.078, body=rgb("#e9ecef"), glaze=rgb("#2a9d8f")),
 )
 
 
@@ -417,19 +263,19 @@ def _mug(radius: float, height: float, body: RGBA, glaze: RGBA) -> list[Part]:
     """
     handle_radius = 0.30 * height
     parts = [
-        _cylinder(radius, height, body, center=(0, 0, 0.5 * height), sections=24),
-        _cylinder(0.84 * radius, 0.004, glaze, center=(0, 0, height), sections=24),
+        cylinder(radius, height, body, center=(0, 0, 0.5 * height), sections=24),
+        cylinder(0.84 * radius, 0.004, glaze, center=(0, 0, height), sections=24),
     ]
     # Half ring in the xz plane on the +x side; axis "y" maps local (u, v) to world (z, x).
-    parts += _ring((handle_radius, handle_radius), 0.009, 0.013, glaze,
+    parts += ring((handle_radius, handle_radius), 0.009, 0.013, glaze,
                    center=(radius - 0.004, 0, 0.5 * height), axis="y", arc=(0.0, np.pi), pieces=3)
     return parts
 
 
 _BOWL = (
-    dict(radius=0.065, height=0.048, outside=_rgb("#1d3557"), inside=_rgb("#f1faee")),
-    dict(radius=0.058, height=0.055, outside=_rgb("#457b9d"), inside=_rgb("#fefae0")),
-    dict(radius=0.070, height=0.040, outside=_rgb("#0077b6"), inside=_rgb("#dbe9f4")),
+    dict(radius=0.065, height=0.048, outside=rgb("#1d3557"), inside=rgb("#f1faee")),
+    dict(radius=0.058, height=0.055, outside=rgb("#457b9d"), inside=rgb("#fefae0")),
+    dict(radius=0.070, height=0.040, outside=rgb("#0077b6"), inside=rgb("#dbe9f4")),
 )
 
 
@@ -437,17 +283,17 @@ def _bowl(radius: float, height: float, outside: RGBA, inside: RGBA) -> list[Par
     """Glazed bowl: flared body on a foot ring, with a light interior disc at the rim."""
     foot_radius, foot_height = 0.48 * radius, 0.006
     return [
-        _cylinder(foot_radius, foot_height, outside, center=(0, 0, 0.5 * foot_height), sections=24),
-        _cylinder(0.56 * radius, height - foot_height + 0.002, outside, end_radius=radius,
+        cylinder(foot_radius, foot_height, outside, center=(0, 0, 0.5 * foot_height), sections=24),
+        cylinder(0.56 * radius, height - foot_height + 0.002, outside, end_radius=radius,
                   center=(0, 0, 0.5 * (height + foot_height) - 0.001), sections=24),
-        _cylinder(0.87 * radius, 0.004, inside, center=(0, 0, height), sections=24),
+        cylinder(0.87 * radius, 0.004, inside, center=(0, 0, height), sections=24),
     ]
 
 
 _BANANA = (
-    dict(arc_length=0.128, radius=0.018, bend=1.00, peel=_rgb("#f7d12e")),
-    dict(arc_length=0.118, radius=0.017, bend=0.75, peel=_rgb("#d9e24a")),  # not quite ripe
-    dict(arc_length=0.105, radius=0.016, bend=1.25, peel=_rgb("#f4b81c")),  # very ripe
+    dict(arc_length=0.128, radius=0.018, bend=1.00, peel=rgb("#f7d12e")),
+    dict(arc_length=0.118, radius=0.017, bend=0.75, peel=rgb("#d9e24a")),  # not quite ripe
+    dict(arc_length=0.105, radius=0.016, bend=1.25, peel=rgb("#f4b81c")),  # very ripe
 )
 _BANANA_PROFILE = (0.45, 1.0, 0.95, 0.45)  # radius along the fruit, stem end first
 
@@ -459,48 +305,48 @@ def _banana(arc_length: float, radius: float, bend: float, peel: RGBA) -> list[P
     spine = np.stack([bend_radius * np.sin(angles), bend_radius * (np.cos(angles) - 1.0),
                       np.zeros_like(angles)], axis=1)
     radii = [(s * radius, s * radius, 0.85 * s * radius) for s in _BANANA_PROFILE]
-    parts = [_blob([(spine[i], radii[i]), (spine[i + 1], radii[i + 1])], peel) for i in range(len(spine) - 1)]
+    parts = [blob([(spine[i], radii[i]), (spine[i + 1], radii[i + 1])], peel) for i in range(len(spine) - 1)]
     # Stem: continues the curve beyond the first point, thinner and greenish brown.
     stem_direction = spine[0] - spine[1]
     stem_end = spine[0] + 0.015 * stem_direction / np.linalg.norm(stem_direction)
     stem_radius = (0.004, 0.004, 0.004)
-    parts.append(_blob([(spine[0], stem_radius), (stem_end, stem_radius)], _rgb("#6b5d2e")))
-    parts.append(_ellipsoid((0.005, 0.005, 0.005), BROWN, center=spine[-1]))
+    parts.append(blob([(spine[0], stem_radius), (stem_end, stem_radius)], rgb("#6b5d2e")))
+    parts.append(ellipsoid((0.005, 0.005, 0.005), BROWN, center=spine[-1]))
     return parts
 
 
 _APPLE = (
-    dict(radius=0.038, height=0.070, skin=_rgb("#c1121f")),
-    dict(radius=0.034, height=0.064, skin=_rgb("#8d0801")),
-    dict(radius=0.041, height=0.074, skin=_rgb("#e5383b")),
+    dict(radius=0.038, height=0.070, skin=rgb("#c1121f")),
+    dict(radius=0.034, height=0.064, skin=rgb("#8d0801")),
+    dict(radius=0.041, height=0.074, skin=rgb("#e5383b")),
 )
 
 
 def _apple(radius: float, height: float, skin: RGBA) -> list[Part]:
     """Apple: slightly squashed sphere with a brown stem and a green leaf on top."""
     return [
-        _ellipsoid((radius, radius, 0.5 * height), skin, center=(0, 0, 0.5 * height)),
-        _cylinder(0.0035, 0.014, BROWN, center=(0, 0, height + 0.002), sections=12),
-        _ellipsoid((0.013, 0.0065, 0.0025), LEAF_GREEN, center=(0.011, 0.004, height - 0.0015)),
+        ellipsoid((radius, radius, 0.5 * height), skin, center=(0, 0, 0.5 * height)),
+        cylinder(0.0035, 0.014, BROWN, center=(0, 0, height + 0.002), sections=12),
+        ellipsoid((0.013, 0.0065, 0.0025), LEAF_GREEN, center=(0.011, 0.004, height - 0.0015)),
     ]
 
 
 _TENNIS_BALL = (
-    dict(radius=0.0335, felt=_rgb("#dfff4f")),  # new ball, optic yellow
-    dict(radius=0.0320, felt=_rgb("#c5e03a")),  # worn ball
-    dict(radius=0.0300, felt=_rgb("#eef76b")),  # junior ball
+    dict(radius=0.0335, felt=rgb("#dfff4f")),  # new ball, optic yellow
+    dict(radius=0.0320, felt=rgb("#c5e03a")),  # worn ball
+    dict(radius=0.0300, felt=rgb("#eef76b")),  # junior ball
 )
 
 
 def _tennis_ball(radius: float, felt: RGBA) -> list[Part]:
     """Tennis ball: a single felt sphere."""
-    return [_ellipsoid((radius, radius, radius), felt)]
+    return [ellipsoid((radius, radius, radius), felt)]
 
 
 _MARKER = (
-    dict(radius=0.0095, length=0.135, ink=_rgb("#1b1b1b")),
-    dict(radius=0.0080, length=0.125, ink=_rgb("#d62828")),
-    dict(radius=0.0110, length=0.115, ink=_rgb("#1d4ed8")),
+    dict(radius=0.0095, length=0.135, ink=rgb("#1b1b1b")),
+    dict(radius=0.0080, length=0.125, ink=rgb("#d62828")),
+    dict(radius=0.0110, length=0.115, ink=rgb("#1d4ed8")),
 )
 
 
@@ -509,16 +355,16 @@ def _marker(radius: float, length: float, ink: RGBA) -> list[Part]:
     cap_length = 0.32 * length
     barrel_length = length - cap_length + 0.002
     return [
-        _cylinder(radius, barrel_length, WHITE, center=(0.5 * barrel_length, 0, 0), axis="x", sections=16),
-        _cylinder(radius + 0.001, cap_length, ink, center=(length - 0.5 * cap_length, 0, 0), axis="x", sections=16),
-        _cylinder(0.8 * radius, 0.006, ink, center=(0.002, 0, 0), axis="x", sections=16),
+        cylinder(radius, barrel_length, WHITE, center=(0.5 * barrel_length, 0, 0), axis="x", sections=16),
+        cylinder(radius + 0.001, cap_length, ink, center=(length - 0.5 * cap_length, 0, 0), axis="x", sections=16),
+        cylinder(0.8 * radius, 0.006, ink, center=(0.002, 0, 0), axis="x", sections=16),
     ]
 
 
 _REMOTE_CONTROL = (
-    dict(size=(0.140, 0.045, 0.020), body=_rgb("#1f1f1f"), keys=_rgb("#5c5c5c")),
-    dict(size=(0.150, 0.040, 0.018), body=_rgb("#3a3d40"), keys=_rgb("#8d9196")),
-    dict(size=(0.120, 0.050, 0.022), body=_rgb("#2f3e46"), keys=_rgb("#cad2c5")),
+    dict(size=(0.140, 0.045, 0.020), body=rgb("#1f1f1f"), keys=rgb("#5c5c5c")),
+    dict(size=(0.150, 0.040, 0.018), body=rgb("#3a3d40"), keys=rgb("#8d9196")),
+    dict(size=(0.120, 0.050, 0.022), body=rgb("#2f3e46"), keys=rgb("#cad2c5")),
 )
 
 
@@ -527,17 +373,17 @@ def _remote_control(size: Sequence[float], body: RGBA, keys: RGBA) -> list[Part]
     length, width, height = size
     top = 0.5 * height
     return [
-        _rounded_box(size, 0.012, body, taper=0.95),
-        _cylinder(0.0045, 0.004, _rgb("#d62828"), center=(0.5 * length - 0.013, -0.22 * width, top), sections=16),
-        _cylinder(0.28 * width, 0.004, keys, center=(0.18 * length, 0, top)),
-        _rounded_box((0.40 * length, 0.62 * width, 0.004), 0.004, keys, center=(-0.20 * length, 0, top)),
+        rounded_box(size, 0.012, body, taper=0.95),
+        cylinder(0.0045, 0.004, rgb("#d62828"), center=(0.5 * length - 0.013, -0.22 * width, top), sections=16),
+        cylinder(0.28 * width, 0.004, keys, center=(0.18 * length, 0, top)),
+        rounded_box((0.40 * length, 0.62 * width, 0.004), 0.004, keys, center=(-0.20 * length, 0, top)),
     ]
 
 
 _TOY_CAR = (
-    dict(length=0.100, width=0.046, body_height=0.016, cabin=(0.40, 0.014), paint=_rgb("#d62828")),  # sports car
-    dict(length=0.090, width=0.044, body_height=0.020, cabin=(0.52, 0.017), paint=_rgb("#ffb703")),  # taxi
-    dict(length=0.085, width=0.048, body_height=0.022, cabin=(0.75, 0.022), paint=_rgb("#1d70b8")),  # van
+    dict(length=0.100, width=0.046, body_height=0.016, cabin=(0.40, 0.014), paint=rgb("#d62828")),  # sports car
+    dict(length=0.090, width=0.044, body_height=0.020, cabin=(0.52, 0.017), paint=rgb("#ffb703")),  # taxi
+    dict(length=0.085, width=0.048, body_height=0.022, cabin=(0.75, 0.022), paint=rgb("#1d70b8")),  # van
 )
 
 
@@ -563,21 +409,21 @@ def _toy_car(length: float, width: float, body_height: float, cabin: tuple[float
     ]) + (cabin_x, 0, 0)
     roof_size = (0.75 * cabin_length - 0.006, 0.85 * (width - 0.006) - 0.004, 0.004)
     parts = [
-        _rounded_box((length, width, body_height), 0.008, paint, center=(0, 0, body_bottom + 0.5 * body_height)),
-        _hull_part(cabin_points, GLASS),
-        _box(roof_size, paint, center=(cabin_x, 0, body_top + cabin_height)),
+        rounded_box((length, width, body_height), 0.008, paint, center=(0, 0, body_bottom + 0.5 * body_height)),
+        hull_part(cabin_points, GLASS),
+        box(roof_size, paint, center=(cabin_x, 0, body_top + cabin_height)),
     ]
     for x in (-0.32 * length, 0.32 * length):
         for side in (-1.0, 1.0):
             center = (x, side * (0.5 * width - 0.5 * wheel_width + 0.002), wheel_radius)
-            parts.append(_cylinder(wheel_radius, wheel_width, RUBBER, center=center, axis="y", sections=16))
+            parts.append(cylinder(wheel_radius, wheel_width, RUBBER, center=center, axis="y", sections=16))
     return parts
 
 
 _SCREWDRIVER = (
-    dict(length=0.150, handle_length=0.060, handle_radius=0.014, handle=_rgb("#c1121f"), tip="flat"),
-    dict(length=0.130, handle_length=0.055, handle_radius=0.013, handle=_rgb("#ffc300"), tip="cross"),
-    dict(length=0.100, handle_length=0.050, handle_radius=0.016, handle=_rgb("#0077b6"), tip="flat"),  # stubby
+    dict(length=0.150, handle_length=0.060, handle_radius=0.014, handle=rgb("#c1121f"), tip="flat"),
+    dict(length=0.130, handle_length=0.055, handle_radius=0.013, handle=rgb("#ffc300"), tip="cross"),
+    dict(length=0.100, handle_length=0.050, handle_radius=0.016, handle=rgb("#0077b6"), tip="flat"),  # stubby
 )
 
 
@@ -587,24 +433,24 @@ def _screwdriver(length: float, handle_length: float, handle_radius: float, hand
     shaft_radius, cap_length = 0.004, 0.014
     shaft_start = handle_length - 0.005
     tip_start = length - 0.010
-    shaft = _pose(_lathe_points([(shaft_start, shaft_radius), (tip_start, shaft_radius)], sections=12), axis="x")
+    shaft = pose(lathe_points([(shaft_start, shaft_radius), (tip_start, shaft_radius)], sections=12), axis="x")
     if tip == "flat":  # wedge flattening to a 9 x 1.5 mm blade
         tip_points = np.array([[length, y, z] for y in (-0.0045, 0.0045) for z in (-0.00075, 0.00075)])
     else:  # cross head: cone to a blunt point
-        tip_points = _pose(_lathe_points([(length, 0.0008)], sections=8), axis="x")
+        tip_points = pose(lathe_points([(length, 0.0008)], sections=8), axis="x")
     return [
-        _cylinder(0.85 * handle_radius, cap_length, RUBBER, end_radius=handle_radius,
+        cylinder(0.85 * handle_radius, cap_length, RUBBER, end_radius=handle_radius,
                   center=(0.5 * cap_length, 0, 0), axis="x", sections=16),
-        _cylinder(handle_radius, handle_length - cap_length + 0.002, handle, end_radius=0.75 * handle_radius,
+        cylinder(handle_radius, handle_length - cap_length + 0.002, handle, end_radius=0.75 * handle_radius,
                   center=(0.5 * (handle_length + cap_length) - 0.001, 0, 0), axis="x", sections=8),
-        _hull_part(np.vstack([shaft, tip_points]), STEEL),
+        hull_part(np.vstack([shaft, tip_points]), STEEL),
     ]
 
 
 _HAMMER = (
-    dict(length=0.150, head_length=0.062, handle=_rgb("#c08552"), grip=None),  # wooden handle
-    dict(length=0.135, head_length=0.056, handle=_rgb("#ffb703"), grip=_rgb("#222222")),  # fibreglass
-    dict(length=0.120, head_length=0.050, handle=_rgb("#c1121f"), grip=_rgb("#333333")),
+    dict(length=0.150, head_length=0.062, handle=rgb("#c08552"), grip=None),  # wooden handle
+    dict(length=0.135, head_length=0.056, handle=rgb("#ffb703"), grip=rgb("#222222")),  # fibreglass
+    dict(length=0.120, head_length=0.050, handle=rgb("#c1121f"), grip=rgb("#333333")),
 )
 
 
@@ -614,12 +460,12 @@ def _hammer(length: float, head_length: float, handle: RGBA, grip: RGBA | None) 
     head_x = length - head_radius
     grip_length = 0.0 if grip is None else 0.42 * length
     handle_start, handle_end = max(grip_length - 0.002, 0.0), length - 0.004
-    parts = [_rounded_box((handle_end - handle_start, 0.016, 0.013), 0.005, handle,
+    parts = [rounded_box((handle_end - handle_start, 0.016, 0.013), 0.005, handle,
                           center=(0.5 * (handle_start + handle_end), 0, 0))]
     if grip is not None:
-        parts.append(_rounded_box((grip_length, 0.019, 0.016), 0.006, grip, center=(0.5 * grip_length, 0, 0)))
+        parts.append(rounded_box((grip_length, 0.019, 0.016), 0.006, grip, center=(0.5 * grip_length, 0, 0)))
     face_length = 0.45 * head_length
-    parts.append(_cylinder(head_radius, face_length + head_radius, STEEL,
+    parts.append(cylinder(head_radius, face_length + head_radius, STEEL,
                            center=(head_x, 0.5 * (face_length - head_radius), 0), axis="y", sections=16))
     claw_tip_y = -(head_length - face_length)
     claw_points = np.array([
@@ -628,14 +474,14 @@ def _hammer(length: float, head_length: float, handle: RGBA, grip: RGBA | None) 
         [head_x - 1.3 * head_radius, claw_tip_y, -0.004], [head_x - 0.7 * head_radius, claw_tip_y, -0.004],
         [head_x - 1.3 * head_radius, claw_tip_y, 0.004], [head_x - 0.7 * head_radius, claw_tip_y, 0.004],
     ])
-    parts.append(_hull_part(claw_points, DARK_STEEL))
+    parts.append(hull_part(claw_points, DARK_STEEL))
     return parts
 
 
 _SPOON = (
-    dict(length=0.145, bowl=(0.025, 0.018), metal=_rgb("#c0c4c8")),  # table spoon
-    dict(length=0.130, bowl=(0.021, 0.015), metal=_rgb("#9aa4ae")),  # dessert spoon
-    dict(length=0.118, bowl=(0.022, 0.019), metal=_rgb("#d4af37")),  # gilded soup spoon
+    dict(length=0.145, bowl=(0.025, 0.018), metal=rgb("#c0c4c8")),  # table spoon
+    dict(length=0.130, bowl=(0.021, 0.015), metal=rgb("#9aa4ae")),  # dessert spoon
+    dict(length=0.118, bowl=(0.022, 0.019), metal=rgb("#d4af37")),  # gilded soup spoon
 )
 
 
@@ -644,17 +490,17 @@ def _spoon(length: float, bowl: tuple[float, float], metal: RGBA) -> list[Part]:
     bowl_half_length, bowl_half_width = bowl
     end_x = bowl_half_length - length  # far end of the handle
     thickness = 0.007
-    handle = _blob([
+    handle = blob([
         ((-0.6 * bowl_half_length, 0.0, 0.010), (0.005, 0.005, 0.5 * thickness)),
         ((end_x + 0.012, 0.0, 0.010), (0.012, 0.009, 0.5 * thickness)),
     ], metal)
-    return [_ellipsoid((bowl_half_length, bowl_half_width, 0.007), metal, center=(0, 0, 0.007)), handle]
+    return [ellipsoid((bowl_half_length, bowl_half_width, 0.007), metal, center=(0, 0, 0.007)), handle]
 
 
 _SPONGE = (
-    dict(size=(0.100, 0.068, 0.030), foam=_rgb("#ffd23f"), scrub=_rgb("#2d6a4f")),
-    dict(size=(0.090, 0.060, 0.026), foam=_rgb("#ffe873"), scrub=_rgb("#52b788")),
-    dict(size=(0.078, 0.054, 0.034), foam=_rgb("#f9a03f"), scrub=_rgb("#1b4332")),
+    dict(size=(0.100, 0.068, 0.030), foam=rgb("#ffd23f"), scrub=rgb("#2d6a4f")),
+    dict(size=(0.090, 0.060, 0.026), foam=rgb("#ffe873"), scrub=rgb("#52b788")),
+    dict(size=(0.078, 0.054, 0.034), foam=rgb("#f9a03f"), scrub=rgb("#1b4332")),
 )
 
 
@@ -664,16 +510,16 @@ def _sponge(size: Sequence[float], foam: RGBA, scrub: RGBA) -> list[Part]:
     scrub_height = 0.008
     foam_height = height - scrub_height
     return [
-        _rounded_box((length, width, foam_height + 0.001), 0.006, foam, center=(0, 0, 0.5 * foam_height)),
-        _rounded_box((length - 0.006, width - 0.006, scrub_height), 0.005, scrub,
+        rounded_box((length, width, foam_height + 0.001), 0.006, foam, center=(0, 0, 0.5 * foam_height)),
+        rounded_box((length - 0.006, width - 0.006, scrub_height), 0.005, scrub,
                      center=(0, 0, foam_height + 0.5 * scrub_height)),
     ]
 
 
 _RUBBER_DUCK = (
-    dict(scale=1.00, body=_rgb("#ffd60a"), beak=_rgb("#f77f00")),
-    dict(scale=0.85, body=_rgb("#ffe55c"), beak=_rgb("#fb8500")),
-    dict(scale=1.15, body=_rgb("#f9c80e"), beak=_rgb("#e85d04")),
+    dict(scale=1.00, body=rgb("#ffd60a"), beak=rgb("#f77f00")),
+    dict(scale=0.85, body=rgb("#ffe55c"), beak=rgb("#fb8500")),
+    dict(scale=1.15, body=rgb("#f9c80e"), beak=rgb("#e85d04")),
 )
 
 
@@ -683,21 +529,21 @@ def _rubber_duck(scale: float, body: RGBA, beak: RGBA) -> list[Part]:
         return scale * np.array(xyz)
 
     parts = [
-        _ellipsoid(at(0.040, 0.030, 0.022), body, center=at(0.0, 0.0, 0.022)),
-        _blob([(at(-0.026, 0.0, 0.026), at(0.012, 0.014, 0.012)), (at(-0.044, 0.0, 0.040), at(0.005, 0.006, 0.005))],
+        ellipsoid(at(0.040, 0.030, 0.022), body, center=at(0.0, 0.0, 0.022)),
+        blob([(at(-0.026, 0.0, 0.026), at(0.012, 0.014, 0.012)), (at(-0.044, 0.0, 0.040), at(0.005, 0.006, 0.005))],
               body),
-        _ellipsoid(at(0.020, 0.020, 0.019), body, center=at(0.018, 0.0, 0.052)),
-        _ellipsoid(at(0.012, 0.010, 0.0045), beak, center=at(0.039, 0.0, 0.048)),
+        ellipsoid(at(0.020, 0.020, 0.019), body, center=at(0.018, 0.0, 0.052)),
+        ellipsoid(at(0.012, 0.010, 0.0045), beak, center=at(0.039, 0.0, 0.048)),
     ]
     for side in (-1.0, 1.0):
-        parts.append(_ellipsoid(at(0.0035, 0.0035, 0.0035), RUBBER, center=at(0.030, side * 0.012, 0.058)))
+        parts.append(ellipsoid(at(0.0035, 0.0035, 0.0035), RUBBER, center=at(0.030, side * 0.012, 0.058)))
     return parts
 
 
 _PADLOCK = (
-    dict(body_size=(0.040, 0.034, 0.018), body=_rgb("#c9a227")),  # brass
-    dict(body_size=(0.050, 0.040, 0.022), body=_rgb("#5a6169")),  # laminated steel
-    dict(body_size=(0.032, 0.028, 0.016), body=_rgb("#d1495b")),  # anodised aluminium
+    dict(body_size=(0.040, 0.034, 0.018), body=rgb("#c9a227")),  # brass
+    dict(body_size=(0.050, 0.040, 0.022), body=rgb("#5a6169")),  # laminated steel
+    dict(body_size=(0.032, 0.028, 0.016), body=rgb("#d1495b")),  # anodised aluminium
 )
 
 
@@ -709,11 +555,11 @@ def _padlock(body_size: Sequence[float], body: RGBA) -> list[Part]:
     leg_length = 0.35 * length
     leg_y0 = 0.5 * length - 0.004
     arch_y = 0.5 * length + leg_length
-    parts = [_rounded_box(body_size, 0.004, body, taper=0.96)]
+    parts = [rounded_box(body_size, 0.004, body, taper=0.96)]
     for side in (-1.0, 1.0):
-        parts.append(_box((bar, arch_y - leg_y0, bar_thickness), STEEL,
+        parts.append(box((bar, arch_y - leg_y0, bar_thickness), STEEL,
                           center=(side * (arch_radius - 0.5 * bar), 0.5 * (leg_y0 + arch_y), 0)))
-    parts += _ring((arch_radius, arch_radius), bar, bar_thickness, STEEL, center=(0, arch_y, 0),
+    parts += ring((arch_radius, arch_radius), bar, bar_thickness, STEEL, center=(0, arch_y, 0),
                    arc=(0.0, np.pi), pieces=3)
     return parts
 
