@@ -107,6 +107,30 @@ def test_geometry_maps_are_the_target_map_presence_and_per_cell_heights():
     assert float(geo[0, 2:].abs().sum()) == pytest.approx(3 * 2.0 + 0.5 + 1.0, abs=1e-4) and float(mean[2, 4]) == 0
 
 
+def test_boundary_map_is_where_the_recognised_class_changes():
+    from mqa_rl.modules.push_qnet import class_boundary
+
+    probs = torch.zeros(1, 3, actions.GRID, actions.GRID)
+    probs[:, 0] = 1.0                                                # floor everywhere
+    probs[:, :, 5:10, 5:10] = torch.tensor([0.0, 1.0, 0.0])[:, None, None]   # an object of class 1
+    probs[:, :, 5:10, 10:12] = torch.tensor([0.0, 0.5, 0.5])[:, None, None]  # beside it: classes 1 or 2
+    b = class_boundary(probs)[0, 0]
+    assert b.shape == (actions.GRID, actions.GRID)
+    assert float(b[7, 7]) == 0 and float(b[20, 20]) == 0 and float(b[0, 0]) == 0    # inside, floor, grid edge
+    assert float(b[5, 7]) == 1 and float(b[4, 7]) == 1                               # object against floor
+    assert float(b[7, 9]) == pytest.approx(0.5) and float(b[7, 10]) == pytest.approx(0.5)  # half-changed class
+    net = _net(rotated_head=True, geometric_push=True, boundary_map=True, head_channels=(8, 8), head_context=1).eval()
+    rgb, depth, q = _obs(batch=1)
+    with torch.no_grad():
+        fr = net._rgb_features(rgb)
+        geo = net.geometry(fr, depth, net._targets(fr, net.question(q)))
+        assert net.q_map(rgb, depth, q).shape == (1, actions.DIRECTIONS + 1, actions.GRID, actions.GRID)
+    assert geo.shape[1] == 6
+    torch.testing.assert_close(geo[:, 5:], class_boundary(torch.softmax(net.class_head(fr), 1)))
+    with pytest.raises(ValueError, match="boundary_map is a channel of the geometric push branch"):
+        _net(rotated_head=True, boundary_map=True)
+
+
 def test_geometric_push_stays_equivariant_to_quarter_turns():
     net = _geometric_net()
     rgb, depth, q = _obs(batch=1)

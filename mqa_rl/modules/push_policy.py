@@ -18,7 +18,7 @@ from mqa_rl.modules.push_qnet import PushQNet
 
 QNET_OPTIONS = {"trunk", "weights", "light_channels", "light_downsample", "fuse_channels", "question_dim", "head_channels",
                 "head_context", "coords", "depth_scale", "freeze_trunk", "target_head", "film", "class_map",
-                "rotated_head", "geometric_push", "geometric_stop"}
+                "rotated_head", "geometric_push", "geometric_stop", "boundary_map", "head_dilation"}
 LOADED_BY_RECIPE = {"name", "masked", "pretrained", "pretrained_frozen"}   # not PushQNet arguments
 
 

@@ -47,6 +47,10 @@ target: a local function of t and height. A push branch that also sees the rgb f
 70 training scenes (docs/policy_attempts.md, seventh attempt: 47 % of pushes near the teacher's there, 5 % on new
 scenes); one that sees no appearance has nothing scene-specific to memorise.
 
+``boundary_map`` (with ``geometric_push``): a sixth geometry channel, the class boundary strength
+(``class_boundary``): where the recognised class changes between neighbouring cells, the objects' outlines.
+``head_dilation`` (with ``rotated_head``): the push branch's context convs dilated (``RotatedPushHead``).
+
 ``geometric_stop`` (with ``class_map`` and ``rotated_head``): the stop branch, too, reads only those five
 maps plus the tiled question feature (which class is asked: how large its objects are). A stop branch on
 the whole state told the teacher's stops from its pushes in 80 % of training states and 69 % of new
@@ -65,7 +69,20 @@ from mqa_rl.modules.trunks import conv_stack, make_trunk
 
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
-GEOMETRY_CHANNELS = 5      # target map, object presence, height mean / max / min per cell
+GEOMETRY_CHANNELS = 5      # target map, object presence, height mean / max / min per cell (+ boundary_map)
+
+
+def class_boundary(probs: torch.Tensor) -> torch.Tensor:
+    """[B, 1, G, G]: how much a cell's class distribution differs from its most different 4-neighbour
+    (total variation, 0…1; the grid's edge counts as no boundary).
+
+    Where two objects of different classes meet, or an object meets the floor, it is high: the outline of
+    the objects the image shows, what the teacher's instance segmentation gives it and a per-cell target map
+    and heights alone do not (two touching objects of the same height are one plateau)."""
+    padded = F.pad(probs, (1, 1, 1, 1), mode="replicate")
+    g = probs.shape[-1]
+    shifts = [padded[..., 1 + dr:1 + dr + g, 1 + dc:1 + dc + g] for dr, dc in ((-1, 0), (1, 0), (0, -1), (0, 1))]
+    return torch.stack([0.5 * (probs - n).abs().sum(1) for n in shifts]).amax(0).unsqueeze(1)
 
 
 class QuestionEncoder(nn.Module):
@@ -109,13 +126,21 @@ class PushQNet(nn.Module):
         rotated_head: bool = False,
         geometric_push: bool = False,
         geometric_stop: bool = False,
+        boundary_map: bool = False,
+        head_dilation: int = 1,
     ):
         super().__init__()
         if geometric_push and not (class_map and rotated_head):
             raise ValueError("geometric_push needs class_map=true (its target map) and rotated_head=true (its push branch)")
         if geometric_stop and not (class_map and rotated_head):
             raise ValueError("geometric_stop needs class_map=true (its target map) and rotated_head=true (its stop branch)")
+        if boundary_map and not geometric_push:
+            raise ValueError("boundary_map is a channel of the geometric push branch: set geometric_push=true")
+        if head_dilation != 1 and not rotated_head:
+            raise ValueError("head_dilation dilates the rotated head's context convs: set rotated_head=true")
         self.geometric_push, self.geometric_stop = bool(geometric_push), bool(geometric_stop)
+        self.boundary_map = bool(boundary_map)
+        self.geometry_channels = GEOMETRY_CHANNELS + int(self.boundary_map)
         self.trunk_name = trunk
         self.imagenet_input = trunk != "light"
         self.depth_channels = 3 if self.imagenet_input else 1    # the ResNets see depth as 3 copies
@@ -136,8 +161,9 @@ class PushQNet(nn.Module):
         self.question_classes = nn.Linear(question_dim, 1 + self.num_classes) if class_map else None
         if rotated_head:      # one push head for all directions (rotated state), its own stop branch
             self.head = RotatedPushHead(state, tuple(head_channels), head_context, actions.DIRECTIONS,
-                                        push_channels=GEOMETRY_CHANNELS if geometric_push else None,
-                                        stop_channels=GEOMETRY_CHANNELS + question_dim if geometric_stop else None)
+                                        push_channels=self.geometry_channels if geometric_push else None,
+                                        stop_channels=self.geometry_channels + question_dim if geometric_stop else None,
+                                        dilation=head_dilation)
         elif head_context:    # 1×1 down to head_channels[0], then 3×3 convs at that width
             width = head_channels[0]
             context = [nn.Conv2d(state, width, 1), nn.ReLU(inplace=True)]
@@ -226,18 +252,20 @@ class PushQNet(nn.Module):
         return torch.cat(parts, 1)
 
     def geometry(self, fr: torch.Tensor, depth: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
-        """[B, 5, 28, 28] the geometric push branch's input: t, object presence, height mean / max / min.
+        """[B, 5 (6), 28, 28] the geometric push branch's input: t, object presence, height mean / max / min
+        (and, with ``boundary_map``, the class boundary strength).
 
         The height is pooled over each cell's pixels as they are (a cell's pixels 8r…8r+7 are centred on
         the push start; no ``_align`` shift, which is for the conv trunk's receptive fields)."""
-        presence = 1.0 - torch.softmax(self.class_head(fr), 1)[:, :1]
+        probs = torch.softmax(self.class_head(fr), 1)
         h = self._height(depth)[:, :1]
         pooled = [F.adaptive_avg_pool2d(h, actions.GRID), F.adaptive_max_pool2d(h, actions.GRID),
                   -F.adaptive_max_pool2d(-h, actions.GRID)]
-        return torch.cat([targets, presence, *pooled], 1)
+        extra = [class_boundary(probs)] if self.boundary_map else []
+        return torch.cat([targets, 1.0 - probs[:, :1], *pooled, *extra], 1)
 
     def geometry_maps(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor) -> torch.Tensor:
-        """``geometry`` from the observation: [B, 5, 28, 28] (``class_map``; the learned stop reads it)."""
+        """``geometry`` from the observation: [B, 5 (6), 28, 28] (``class_map``; the learned stop reads it)."""
         if self.class_head is None:
             raise RuntimeError("this PushQNet has no class head: build it with class_map=True")
         fr, qf = self._rgb_features(rgb), self.question(question)

@@ -13,6 +13,11 @@ question's target map and the height map (``PushQNet(geometric_push=True)``), wh
 the whole state. ``stop_channels``: the stop branch reads its own input too (``stop_input``; e.g. those maps
 and the tiled question feature, ``PushQNet(geometric_stop=True)``).
 
+``dilation`` (> 1): the push branch's i-th context conv is dilated by ``dilation``**i (Yu & Koltun's context
+module): with 3 context convs and dilation 2 each push value sees 15 × 15 cells instead of 7 × 7. The teacher
+starts its pushes at a target's edge (within 3 cells of a visible target in 99.5 % of its pushes) but aims them
+from the target's centre to its occluder's, and objects span up to ~20 cells: a 7 × 7 view sees their edges only.
+
 Rotation equivariance by construction: rotating the scene by 90° moves Q of direction d to direction
 d + 2, rotated (``tests/test_push_qnet.py``). Directions follow ``mqa_rl.envs.actions``: d·45°
 counter-clockwise as seen in the image (d = 0 points right, d = 2 up).
@@ -29,9 +34,9 @@ from torch import nn
 from mqa_rl.modules.trunks import conv_stack
 
 
-def _branch(width: int, context: int, head_channels: tuple[int, ...]) -> nn.Sequential:
-    """3×3 context convs at ``width``, then 1×1 convs down to one map."""
-    return nn.Sequential(conv_stack([width] * (context + 1), kernel=3),
+def _branch(width: int, context: int, head_channels: tuple[int, ...], dilation: int = 1) -> nn.Sequential:
+    """3×3 context convs at ``width`` (the i-th dilated by ``dilation``**i), then 1×1 convs down to one map."""
+    return nn.Sequential(conv_stack([width] * (context + 1), kernel=3, dilations=[dilation ** i for i in range(context)]),
                          conv_stack([width, *head_channels[1:], 1], last_relu=False))
 
 
@@ -40,7 +45,7 @@ class RotatedPushHead(nn.Module):
 
     def __init__(self, state_channels: int, head_channels: tuple[int, ...] = (16, 16), context: int = 2,
                  directions: int = 8, pad: int = 2, push_channels: int | None = None,
-                 stop_channels: int | None = None):
+                 stop_channels: int | None = None, dilation: int = 1):
         super().__init__()
         width = head_channels[0]
         self.reduce = (None if (push_channels and stop_channels)      # neither branch reads the state
@@ -49,7 +54,9 @@ class RotatedPushHead(nn.Module):
                             if push_channels else None)
         self.stop_reduce = (nn.Sequential(nn.Conv2d(stop_channels, width, 1), nn.ReLU(inplace=True))
                             if stop_channels else None)
-        self.push = _branch(width, context, tuple(head_channels))
+        if int(dilation) < 1:
+            raise ValueError(f"head dilation must be an integer >= 1, got {dilation}")
+        self.push = _branch(width, context, tuple(head_channels), int(dilation))
         self.stop = _branch(width, context, tuple(head_channels))
         self.directions, self.pad = int(directions), int(pad)
         angles = torch.tensor([2 * math.pi * d / directions for d in range(directions)])
