@@ -31,3 +31,15 @@ def test_the_quick_student_profile_loads_the_shipped_recognition_frozen():
     assert not any(p.requires_grad for p in net.class_head.parameters())
     assert all(p.requires_grad for p in net.question.parameters())
 
+
+
+def test_the_quick_chain_names_its_teachers_and_refuses_others(tmp_path):
+    import os
+    import subprocess
+
+    script = (REPO / "tools/train_student.sh").read_text()
+    assert '"oracle.refine_radius=$REFINE"' in script and "refined) REFINE=1" in script and "image) REFINE=0" in script
+    done = subprocess.run(["bash", str(REPO / "tools/train_student.sh"), str(tmp_path / "run"), "0"],
+                          env={**os.environ, "MQA_TEACHER": "bogus"}, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and "MQA_TEACHER must be 'refined' or 'image'" in done.stderr
+    assert not (tmp_path / "run").exists()                 # refused before anything is written

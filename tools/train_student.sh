@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # The learned push policy end to end on 2 CPU cores (22-24 min measured five times; docs/policy_attempts.md, "Twelfth" and "Thirteenth attempt"):
 #   1. the refined teacher's demonstrations on the train split, two processes at once (2 x 600 states)
+#      (MQA_TEACHER=image: the image teacher instead, no simulated previews: 1.5 min instead of 9-11.5;
+#       docs/policy_attempts.md, "Fifteenth attempt")
 #   2. the geometric student imitating them (profile=cpu_quick_student: 2,500 updates, the shipped recognition)
 #   3. its stop, learnt from its own never-stopping episodes on the train split (recipes/fit_stop.py)
 #   4. with MQA_EVAL=<episodes per level>: greedy + learned stop vs random on the test split
@@ -15,6 +17,11 @@
 #   python recipes/evaluate_policy.py run=ROOT/dqn stop_critic=ROOT/stop episodes_per_level=300
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
+case "${MQA_TEACHER:-refined}" in
+  refined) REFINE=1 ;;      # the image teacher's push, the best of 9 simulated starts
+  image) REFINE=0 ;;        # its push as the image and the segmentation say, no previews
+  *) echo "MQA_TEACHER must be 'refined' or 'image', got '${MQA_TEACHER}'" >&2; exit 2 ;;
+esac
 . tools/bootstrap.sh
 ROOT=${1:-runs/student}
 SEED=${2:-0}
@@ -23,12 +30,12 @@ start=$SECONDS
 step() { echo "=== [$(( (SECONDS - start) / 60 )) min $(( (SECONDS - start) % 60 )) s] $*"; }
 [ -d data/mqa ] || { step "the dataset (python recipes/make_dataset.py)"; python recipes/make_dataset.py; }
 
-step "demonstrations of the refined teacher: 2 x ${MQA_DEMO_STATES:-600} states, two processes -> $ROOT/demos_{0,1}"
+step "demonstrations of the ${MQA_TEACHER:-refined} teacher: 2 x ${MQA_DEMO_STATES:-600} states, two processes -> $ROOT/demos_{0,1}"
 pids=()
 for k in 0 1; do
   if [ ! -f "$ROOT/demos_$k/demos.json" ]; then
     python recipes/collect_demonstrations.py "states=${MQA_DEMO_STATES:-600}" "seed=$(( 2 * SEED + k + 100 ))" \
-      oracle.order=visible_first oracle.geometry=visible oracle.refine_radius=1 progress=false \
+      oracle.order=visible_first oracle.geometry=visible "oracle.refine_radius=$REFINE" progress=false \
       "out_dir=$ROOT/demos_$k" &
     pids+=($!)
   fi
