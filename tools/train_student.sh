@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
-# The learned push policy end to end on 2 CPU cores (22-24 min measured five times; docs/policy_attempts.md, "Twelfth" and "Thirteenth attempt"):
-#   1. the refined teacher's demonstrations on the train split, two processes at once (2 x 600 states)
-#      (MQA_TEACHER=image: the image teacher instead, no simulated previews: 1.5 min instead of 9-11.5;
-#       docs/policy_attempts.md, "Fifteenth attempt")
+# The learned push policy end to end on 2 CPU cores (14-15 min measured four times; docs/policy_attempts.md,
+# "Twelfth", "Thirteenth" and "Fifteenth attempt"):
+#   1. the image teacher's demonstrations on the train split, two processes at once (2 x 600 states, ~1.5 min)
+#      (MQA_TEACHER=refined: the refined teacher instead, its push the best of 9 simulated starts: 9-11.5 min,
+#       the chain 22-24 min; its students beat random on hard in 3 runs of 5, the image teacher's in 4 of 4)
 #   2. the geometric student imitating them (profile=cpu_quick_student: 2,500 updates, the shipped recognition)
 #   3. its stop, learnt from its own never-stopping episodes on the train split (recipes/fit_stop.py)
 #   4. with MQA_EVAL=<episodes per level>: greedy + learned stop vs random on the test split
@@ -17,10 +18,11 @@
 #   python recipes/evaluate_policy.py run=ROOT/dqn stop_critic=ROOT/stop episodes_per_level=300
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
-case "${MQA_TEACHER:-refined}" in
+TEACHER=${MQA_TEACHER:-image}
+case "$TEACHER" in
+  image) REFINE=0 ;;        # the push the image and the segmentation say, no previews
   refined) REFINE=1 ;;      # the image teacher's push, the best of 9 simulated starts
-  image) REFINE=0 ;;        # its push as the image and the segmentation say, no previews
-  *) echo "MQA_TEACHER must be 'refined' or 'image', got '${MQA_TEACHER}'" >&2; exit 2 ;;
+  *) echo "MQA_TEACHER must be 'image' or 'refined', got '${TEACHER}'" >&2; exit 2 ;;
 esac
 . tools/bootstrap.sh
 ROOT=${1:-runs/student}
@@ -28,9 +30,22 @@ SEED=${2:-0}
 shift $(( $# < 2 ? $# : 2 ))
 start=$SECONDS
 step() { echo "=== [$(( (SECONDS - start) / 60 )) min $(( (SECONDS - start) % 60 )) s] $*"; }
+# a ROOT may already hold demonstrations: only of the teacher asked for (reused), never silently of the other
+for k in 0 1; do
+  demos="$ROOT/demos_$k/demos.json"
+  if [ -f "$demos" ]; then
+    have=$(python -c "import json, sys; print(json.load(open(sys.argv[1]))['oracle']['refine_radius'])" "$demos")
+    if [ "$have" != "$REFINE" ]; then
+      echo "$ROOT/demos_$k holds demonstrations with oracle.refine_radius=$have, not the $TEACHER teacher's ($REFINE):" \
+           "choose another ROOT, set MQA_TEACHER to match, or remove $ROOT/demos_$k" >&2
+      exit 2
+    fi
+  fi
+done
+
 [ -d data/mqa ] || { step "the dataset (python recipes/make_dataset.py)"; python recipes/make_dataset.py; }
 
-step "demonstrations of the ${MQA_TEACHER:-refined} teacher: 2 x ${MQA_DEMO_STATES:-600} states, two processes -> $ROOT/demos_{0,1}"
+step "demonstrations of the $TEACHER teacher: 2 x ${MQA_DEMO_STATES:-600} states, two processes -> $ROOT/demos_{0,1}"
 pids=()
 for k in 0 1; do
   if [ ! -f "$ROOT/demos_$k/demos.json" ]; then
