@@ -1,6 +1,9 @@
 """The 30-minute student (profile=cpu_quick_student, tools/train_student.sh) starts from the shipped
 recognition file: the profile must build a network that file fits, frozen, with the budget it promises."""
 
+import json
+import os
+import subprocess
 from pathlib import Path
 
 import torch
@@ -33,30 +36,27 @@ def test_the_quick_student_profile_loads_the_shipped_recognition_frozen():
 
 
 
-def test_the_quick_chain_names_its_teachers_and_refuses_others(tmp_path):
-    import os
-    import subprocess
+def run_quick_chain(root, **env):
+    """tools/train_student.sh on ROOT, seed 0, with MQA_TEACHER as given (unset when not)."""
+    base = {k: v for k, v in os.environ.items() if k != "MQA_TEACHER"}
+    return subprocess.run(["bash", str(REPO / "tools/train_student.sh"), str(root), "0"],
+                          env={**base, **env}, capture_output=True, text=True, timeout=300)
 
+
+def test_the_quick_chain_names_its_teachers_and_refuses_others(tmp_path):
     script = (REPO / "tools/train_student.sh").read_text()
     assert '"oracle.refine_radius=$REFINE"' in script and "refined) REFINE=1" in script and "image) REFINE=0" in script
     assert "TEACHER=${MQA_TEACHER:-image}" in script      # the image teacher by default (fifteenth attempt)
-    done = subprocess.run(["bash", str(REPO / "tools/train_student.sh"), str(tmp_path / "run"), "0"],
-                          env={**os.environ, "MQA_TEACHER": "bogus"}, capture_output=True, text=True, timeout=60)
+    done = run_quick_chain(tmp_path / "run", MQA_TEACHER="bogus")
     assert done.returncode == 2 and "MQA_TEACHER must be 'image' or 'refined'" in done.stderr
     assert not (tmp_path / "run").exists()                 # refused before anything is written
 
 
 def test_the_quick_chain_refuses_to_reuse_the_other_teachers_demonstrations(tmp_path):
-    import json
-    import os
-    import subprocess
-
     demos = tmp_path / "run" / "demos_0"
     demos.mkdir(parents=True)
     (demos / "demos.json").write_text(json.dumps({"states": 600, "oracle": {"refine_radius": 1}}))   # refined teacher's
-    done = subprocess.run(["bash", str(REPO / "tools/train_student.sh"), str(tmp_path / "run"), "0"],
-                          env={k: v for k, v in os.environ.items() if k != "MQA_TEACHER"},
-                          capture_output=True, text=True, timeout=300)
+    done = run_quick_chain(tmp_path / "run")
     assert done.returncode == 2, done.stderr[-2000:]
     assert "demos_0 holds demonstrations with oracle.refine_radius=1, not the image teacher's (0)" in done.stderr
     assert sorted(p.name for p in (tmp_path / "run").iterdir()) == ["demos_0"]      # nothing else started
