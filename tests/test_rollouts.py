@@ -149,3 +149,37 @@ def test_dqn_checkpoint_and_reference_policies(small_dataset, tmp_path):
     collect_rollouts(out, dataset=small_dataset, levels=levels, **{**plan, "policy": {"kind": "privileged", "lookahead": 1}})
     r = load_records(out)
     assert r.shape[0] == 2 and (r[keys.PUSHES] <= 2).all()
+
+
+def test_a_run_trained_with_push_memory_is_rolled_out_with_it(small_dataset, small_dataset_dir, tmp_path):
+    """A policy trained and stop-fitted with the push memory (env.push_memory in its run's config) runs in the
+    answering rollouts with it: no push twice in an episode; push_memory=-1 turns it off."""
+    from torchrl.envs import TransformedEnv
+    from torchrl.envs.utils import set_exploration_type
+
+    from mqa_rl.envs import actions
+    from mqa_rl.envs.sapien_bin import SapienBinEnv
+
+    run = tmp_path / "dqn_run"
+    _fake_dqn_run(run, SapienBinEnv(small_dataset, split="train"))
+    cfg = OmegaConf.load(run / "config.yaml")
+    cfg.env = {"push_memory": 1}
+    OmegaConf.save(cfg, run / "config.yaml")
+    never_stop = {"kind": "dqn", "run": str(run), "stop_margin": 1e9}
+    assert "push_memory" not in resolve_checkpoint({**never_stop, "push_memory": -1})
+    spec = resolve_checkpoint(never_stop)
+    assert spec["push_memory"] == 1
+    env_kwargs = {"max_pushes": 4, "image_size": 224, "pusher": "finger"}
+    state = rollouts._build(str(small_dataset_dir), env_kwargs, spec, {})
+    env = state["env"]
+    assert isinstance(env, TransformedEnv)
+    question = next(q for q in small_dataset.questions if small_dataset.scene(q.scene_id).difficulty == "hard")
+    td = env.reset(question_id=question.id)
+    with torch.no_grad(), set_exploration_type(state["exploration"]):
+        traj = env.rollout(5, state["policy"], auto_reset=False, tensordict=td, break_when_any_done=True)
+    taken = traj[keys.ACTION].reshape(-1).tolist()
+    assert len(taken) == 4 and actions.STOP not in taken
+    assert len(set(taken)) == 4                                  # the memory masked every earlier push
+    for t in range(1, 4):
+        assert not traj[keys.ACTION_MASK][t, taken[:t]].any()
+    env.close()

@@ -35,7 +35,7 @@ from mqa_rl.data.dataset import LEVELS, MQADataset, dataset_fingerprint
 from mqa_rl.data.questions import QUESTION_TYPES
 from mqa_rl.collectors.store import EpisodeStore
 from mqa_rl.envs.sapien_bin import SapienBinEnv
-from mqa_rl.modules.frozen_policies import is_deterministic, make_frozen_policy, resolve_checkpoint
+from mqa_rl.modules.frozen_policies import env_with_memory, is_deterministic, make_frozen_policy, resolve_checkpoint
 from mqa_rl.transforms.episode_stats import mean_target_chi
 
 SCHEMA = 1
@@ -132,7 +132,7 @@ _WORKER: dict = {}
 
 
 def _build(dataset_root: str, env_kwargs: dict, spec: dict, run: dict) -> dict:
-    env = SapienBinEnv(dataset_root, split=None, **env_kwargs)
+    env = env_with_memory(SapienBinEnv(dataset_root, split=None, **env_kwargs), spec)
     policy, exploration = make_frozen_policy(spec, env, env_kwargs["max_pushes"])
     return dict(env=env, policy=policy, exploration=exploration, run=run)
 

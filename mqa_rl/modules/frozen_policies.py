@@ -7,7 +7,9 @@ mapping), frozen: nothing here learns.
     {kind: dqn, run: runs/local}            a train_dqn.py run, greedy (newest checkpoint, or checkpoint=...);
                                             epsilon > 0 makes it ε-greedy (rollouts of a question then differ);
                                             stop_margin: m stops only when Q(stop) >= best push + m (StopMargin);
-                                            stop_critic: <recipes/fit_stop.py out_dir> stops as it predicts
+                                            stop_critic: <recipes/fit_stop.py out_dir> stops as it predicts;
+                                            push_memory: r (default the run's env.push_memory; < 0: none) runs it
+                                            in an env with PushMemory(r), as it was trained (``env_with_memory``)
     {kind: privileged, lookahead: 1}        the oracle reference (reads the simulator; see privileged_policy;
                                             order: visible_first, image_visible: true = the visible teacher)
 
@@ -23,9 +25,11 @@ from collections.abc import Mapping
 from pathlib import Path
 
 import torch
+from omegaconf import OmegaConf
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 from torchrl.checkpoint import CheckpointRotation
+from torchrl.envs import TransformedEnv
 from torchrl.envs.utils import ExplorationType
 
 from mqa_rl import keys
@@ -37,6 +41,7 @@ from mqa_rl.modules.q_override import best_allowed_push, take_action
 from mqa_rl.modules.trained_policy import load_greedy
 from mqa_rl.modules.random_policy import RandomMQAPolicy
 from mqa_rl.training.checkpoint import newest_checkpoint
+from mqa_rl.transforms.push_memory import PushMemory, memory_radius
 
 KINDS = ("random", "random_masked", "none", "dqn", "privileged")
 PRIVILEGED_OPTIONS = ("min_visible_px", "min_visible_fraction", "max_tries_per_occluder", "lookahead", "order",
@@ -114,7 +119,11 @@ def check_spec(spec: Mapping) -> dict:
             raise ValueError(f"dqn epsilon={spec['epsilon']} must lie in [0, 1]")
         if spec.get("stop_margin") is not None and spec.get("stop_critic") is not None:
             raise ValueError("a dqn policy takes stop_margin or stop_critic, not both")
-    unknown = set(spec) - {"kind", "run", "checkpoint", "epsilon", "stop_margin", "stop_critic", *PRIVILEGED_OPTIONS}
+        if spec.get("push_memory") is not None and not isinstance(spec["push_memory"], int):
+            raise ValueError(f"dqn push_memory={spec['push_memory']!r} must be an integer radius in grid cells "
+                             f"(negative: no memory) or null (the run's env.push_memory)")
+    unknown = set(spec) - {"kind", "run", "checkpoint", "epsilon", "stop_margin", "stop_critic", "push_memory",
+                           *PRIVILEGED_OPTIONS}
     if unknown:
         raise ValueError(f"unknown policy option(s) {sorted(unknown)} for kind {kind!r}")
     return spec
@@ -122,15 +131,21 @@ def check_spec(spec: Mapping) -> dict:
 
 def resolve_checkpoint(spec: Mapping) -> dict:
     """For ``dqn``: the spec with ``checkpoint`` set to the newest one of the run (so that a collection
-    records which weights it used, and a run trained further later is not mixed in). FileNotFoundError
-    when the run has none yet."""
+    records which weights it used, and a run trained further later is not mixed in) and ``push_memory``
+    resolved (the spec's, else the run's ``env.push_memory``: a policy is rolled out with the memory it was
+    trained and its stop fitted with; absent when none). FileNotFoundError when the run has none yet."""
     spec = check_spec(spec)
-    if spec["kind"] != "dqn" or spec.get("checkpoint"):
+    if spec["kind"] != "dqn":
         return spec
     run = Path(spec["run"])
     if not (run / "config.yaml").exists():
         raise FileNotFoundError(f"{run / 'config.yaml'} not found: train the policy first "
                                 f"(python recipes/train_dqn.py out_dir={run} reward=...)")
+    radius = memory_radius(spec.pop("push_memory", None), OmegaConf.load(run / "config.yaml").get("env"))
+    if radius is not None:
+        spec["push_memory"] = radius
+    if spec.get("checkpoint"):
+        return spec
     latest = newest_checkpoint(CheckpointRotation(run / "checkpoints", keep_last=1))
     if latest is None:
         raise FileNotFoundError(f"no checkpoint in {run / 'checkpoints'}: train the policy first")
@@ -140,6 +155,12 @@ def resolve_checkpoint(spec: Mapping) -> dict:
 def is_deterministic(spec: Mapping) -> bool:
     kind = spec["kind"]
     return kind in ("none", "privileged") or (kind == "dqn" and float(spec.get("epsilon", 0.0)) == 0.0)
+
+
+def env_with_memory(env, spec: Mapping):
+    """``env`` wrapped in the push memory a resolved spec asks for (``resolve_checkpoint``), else itself."""
+    radius = spec.get("push_memory")
+    return env if radius is None else TransformedEnv(env, PushMemory(int(radius)))
 
 
 def make_frozen_policy(spec: Mapping, env, max_pushes: int):
@@ -158,7 +179,7 @@ def make_frozen_policy(spec: Mapping, env, max_pushes: int):
     if spec.get("stop_margin") is not None:
         actor = StopMargin(actor, float(spec["stop_margin"]))
     if spec.get("stop_critic") is not None:
-        actor = LearnedStop.from_file(actor, spec["stop_critic"], max_pushes)
+        actor = LearnedStop.from_file(actor, spec["stop_critic"], max_pushes, spec.get("push_memory"))
     eps = float(spec.get("epsilon", 0.0))
     if eps == 0.0:
         return actor, ExplorationType.DETERMINISTIC
