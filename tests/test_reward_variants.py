@@ -1,0 +1,48 @@
+"""tools/train_reward_variants.sh: the paper's three rewards as DQfD continuations of a finished student. Its
+refusals come before anything is written, and the answering systems point at the folders it writes."""
+
+import subprocess
+from pathlib import Path
+
+from conftest import compose_recipe_config
+
+REPO = Path(__file__).parents[1]
+
+
+def run_variants(*args, **env):
+    import os
+
+    return subprocess.run(["bash", str(REPO / "tools/train_reward_variants.sh"), *map(str, args)],
+                          env={**os.environ, **env}, capture_output=True, text=True, timeout=120)
+
+
+def test_it_refuses_a_folder_without_a_finished_student(tmp_path):
+    (tmp_path / "student" / "dqn").mkdir(parents=True)
+    done = run_variants(tmp_path / "student", tmp_path / "out")
+    assert done.returncode == 2 and "holds no finished imitation student" in done.stderr
+    assert "bash tools/train_student.sh" in done.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_it_refuses_bad_frames_and_unknown_variants_before_writing(tmp_path):
+    student = tmp_path / "student"
+    (student / "dqn" / "checkpoints" / "checkpoint-000000000008").mkdir(parents=True)
+    (student / "demos_1").mkdir()
+    (student / "demos_1" / "demos.json").write_text("{}")
+    done = run_variants(student, tmp_path / "out", "ten")
+    assert done.returncode == 2 and "FRAMES must be a positive integer" in done.stderr
+    done = run_variants(student, tmp_path / "out", 0)
+    assert done.returncode == 2 and "FRAMES must be a positive integer" in done.stderr
+    done = run_variants(student, tmp_path / "out", 100, MQA_VARIANTS="global lokal")
+    assert done.returncode == 2 and "unknown variant 'lokal'" in done.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_the_answering_systems_read_the_folders_it_writes():
+    cfg = compose_recipe_config("evaluate", [])
+    script = (REPO / "tools/train_reward_variants.sh").read_text()
+    assert "OUT=${2:-runs/reward_variants}" in script and 'run="$OUT/$v"' in script
+    for variant in ("global", "local", "global_local"):
+        spec = cfg.systems[f"dqfd_{variant}"]
+        assert spec.kind == "dqn"
+        assert spec.run == f"runs/reward_variants/{variant}/dqn" and spec.stop_critic == f"runs/reward_variants/{variant}/stop"

@@ -1,0 +1,64 @@
+#!/usr/bin/env bash
+# The paper's three reward variants as DQN from demonstrations (DQfD): each one continues a finished imitation
+# student (tools/train_student.sh ROOT SEED) with DQN on its own reward — R_g (global), R_l (local), R_g+R_l
+# (global_local) — the demonstrations' margin loss beside every update, as DQfD does; then its stop is learnt
+# from its own pushes like the student's. The paper's variants trained from scratch on our CPU budget do not
+# uncover the targets (README, "Where the policy stands"); these start from a policy that does.
+#
+#   bash tools/train_reward_variants.sh STUDENT_ROOT [OUT_ROOT] [FRAMES] [train_dqn overrides ...]
+#     STUDENT_ROOT  a tools/train_student.sh folder (its dqn/ imitation run and demos_{0,1}/)
+#     OUT_ROOT      default runs/reward_variants: OUT_ROOT/<variant>/{dqn,stop}, OUT_ROOT/<variant>/eval with MQA_EVAL
+#     FRAMES        environment frames of DQN per variant after the imitation (default 1000)
+#   MQA_VARIANTS="global local global_local" (default: all three), MQA_EVAL=<episodes per level> and
+#   MQA_BASELINE=<an earlier evaluation's out_dir> as in tools/train_student.sh.
+#
+# Each variant starts from a copy of the student's checkpoint (weights, optimiser, the 8 imitation frames in its
+# replay buffer, counters; not its logger's run). Running the same command again skips finished steps and resumes
+# an interrupted one. Use in the answering recipes as systems dqfd_global / dqfd_local / dqfd_global_local
+# (recipes/conf/answering/default.yaml), or any OUT_ROOT with systems.dqfd_<variant>.run=... overrides.
+set -euo pipefail
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
+STUDENT=${1:?usage: bash tools/train_reward_variants.sh STUDENT_ROOT [OUT_ROOT] [FRAMES] [overrides ...]}
+OUT=${2:-runs/reward_variants}
+FRAMES=${3:-1000}
+shift $(( $# < 3 ? $# : 3 ))
+case "$FRAMES" in ''|*[!0-9]*) echo "FRAMES must be a positive integer, got '$FRAMES'" >&2; exit 2 ;; esac
+[ "$FRAMES" -gt 0 ] || { echo "FRAMES must be a positive integer, got '$FRAMES'" >&2; exit 2; }
+if ! compgen -G "$STUDENT/dqn/checkpoints/checkpoint-*" > /dev/null || [ ! -f "$STUDENT/demos_1/demos.json" ]; then
+  echo "$STUDENT holds no finished imitation student (dqn/checkpoints and demos_0,1): run" \
+       "bash tools/train_student.sh $STUDENT <seed> first" >&2
+  exit 2
+fi
+for v in ${MQA_VARIANTS:-global local global_local}; do
+  case "$v" in global|local|global_local) ;; *) echo "unknown variant '$v': global, local or global_local" >&2; exit 2 ;; esac
+done
+. tools/bootstrap.sh
+read -r SEED BASE_FRAMES < <(python -c "
+import sys; from omegaconf import OmegaConf
+c = OmegaConf.load(sys.argv[1]); print(c.seed, c.collector.total_frames)" "$STUDENT/dqn/config.yaml")
+start=$SECONDS
+step() { echo "=== [$(( (SECONDS - start) / 60 )) min $(( (SECONDS - start) % 60 )) s] $*"; }
+for v in ${MQA_VARIANTS:-global local global_local}; do
+  run="$OUT/$v"
+  if ! compgen -G "$run/dqn/checkpoints/checkpoint-*" > /dev/null; then
+    step "DQN($v) starts from $STUDENT/dqn"
+    mkdir -p "$run"
+    rm -rf "$run/.dqn.tmp" && mkdir "$run/.dqn.tmp"
+    cp -r "$STUDENT/dqn/checkpoints" "$STUDENT/dqn/csv" "$STUDENT/dqn/config.yaml" "$run/.dqn.tmp/"
+    mv "$run/.dqn.tmp" "$run/dqn"
+  fi
+  step "DQN($v): $FRAMES frames with its reward beside the demonstrations -> $run/dqn"
+  python recipes/train_dqn.py dataset=data/mqa "reward=$v" profile=cpu_quick_student \
+    "demos.path=[$STUDENT/demos_0,$STUDENT/demos_1]" "seed=$SEED" "out_dir=$run/dqn" resume=true \
+    "collector.total_frames=$(( BASE_FRAMES + FRAMES ))" "$@"
+  if [ ! -f "$run/stop/stop_critic.pt" ]; then
+    step "DQN($v): its stop, from its own pushes on the train split -> $run/stop"
+    python recipes/fit_stop.py "run=$run/dqn" episodes_per_level=100 "out_dir=$run/stop"
+  fi
+  if [ -n "${MQA_EVAL:-}" ]; then
+    step "DQN($v): test split, greedy + learned stop vs random, $MQA_EVAL episodes per level -> $run/eval"
+    python recipes/evaluate_policy.py "run=$run/dqn" "stop_critic=$run/stop" "episodes_per_level=$MQA_EVAL" \
+      'policies=[greedy,random]' video_episodes=0 "out_dir=$run/eval" ${MQA_BASELINE:+"baseline_from=$MQA_BASELINE"}
+  fi
+done
+step "done: $OUT/{${MQA_VARIANTS:-global local global_local}}/{dqn,stop}"
