@@ -151,3 +151,22 @@ def test_evaluate_from_the_command_line(trained, tmp_path):
                          cwd=tmp_path, capture_output=True, text=True, timeout=600, env=env)
     assert out.returncode == 0, out.stderr[-3000:]
     assert "| random |" in out.stdout and (tmp_path / "report" / "table3.md").exists()
+
+
+def test_the_goals_are_checked_for_each_family_of_reward_variants():
+    from mqa_rl.evaluation.answering_report import verdict
+
+    def system(acc, vs_random):
+        return {"status": "ok", "accuracy": {"counting": {lv: {"accuracy": acc} for lv in ("easy", "medium", "hard")}},
+                "vs_random": {lv: (vs_random, 0.05, 100) for lv in ("easy", "medium", "hard")}}
+
+    results = {"systems": {"random": system(0.40, 0.0), "dqn_global": system(0.38, -0.02),
+                           "dqfd_global": system(0.60, 0.2), "dqfd_local": system(0.55, 0.15),
+                           "dqfd_global_local": {"status": "missing", "reason": "no checkpoint"}}}
+    lines = verdict(results)
+    assert len(lines) == 6                                   # two families present, three levels each
+    assert lines[0].startswith("easy: best DQN dqn_global 0.380 <= the paper's best 0.477")
+    assert lines[0].endswith("not above random: dqn_global")
+    assert lines[3].startswith("easy: best DQfD dqfd_global 0.600 > the paper's best 0.477")
+    assert lines[3].endswith("every DQfD variant above random")
+    assert verdict({"systems": {"random": system(0.4, 0.0)}})[0].startswith("no DQN system evaluated yet")

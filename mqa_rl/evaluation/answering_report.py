@@ -17,7 +17,7 @@ import os
 from pathlib import Path
 
 from mqa_rl.data.dataset import LEVELS
-from mqa_rl.evaluation.paper import PAPER_BEST, PAPER_NAMES, TABLE_III
+from mqa_rl.evaluation.paper import PAPER_BEST, PAPER_NAMES, TABLE_III, VARIANT_FAMILIES
 
 
 def write_atomic(path: Path, text: str | bytes) -> Path:
@@ -77,23 +77,26 @@ def table3_markdown(results: dict, qtype: str = "counting") -> str:
 
 
 def verdict(results: dict, qtype: str = "counting") -> list[str]:
-    """The issue's goals, checked level by level on the measured table (missing systems say so)."""
+    """The issue's goals, checked level by level on the measured table for each family of the three reward
+    variants present (the paper's DQN, ours from demonstrations; missing systems say so)."""
     ok = {n: r for n, r in results["systems"].items() if r["status"] == "ok"}
-    dqn = [n for n in ("dqn_global", "dqn_local", "dqn_global_local") if n in ok]
-    out = []
-    if not dqn:
+    families = {f: [n for n in names if n in ok] for f, names in VARIANT_FAMILIES.items()}
+    families = {f: names for f, names in families.items() if names}
+    if not families:
         return ["no DQN system evaluated yet: the goals (every DQN variant beats random, the best beats the paper's "
                 "best) cannot be checked"]
-    for lv in LEVELS:
-        acc = {n: ok[n]["accuracy"].get(qtype, {}).get(lv, {}).get("accuracy", math.nan) for n in dqn}
-        best = max(acc, key=lambda n: acc[n])
-        beats_paper = acc[best] > PAPER_BEST[lv]
-        text = (f"{lv}: best DQN {best} {acc[best]:.3f} {'>' if beats_paper else '<='} the paper's best "
-                f"{PAPER_BEST[lv]:.3f}")
-        if "random" in ok:
-            worse = [n for n in dqn if not ok[n]["vs_random"][lv][0] > 0]
-            text += "; every DQN variant above random" if not worse else f"; not above random: {', '.join(worse)}"
-        out.append(text)
+    out = []
+    for family, dqn in families.items():
+        for lv in LEVELS:
+            acc = {n: ok[n]["accuracy"].get(qtype, {}).get(lv, {}).get("accuracy", math.nan) for n in dqn}
+            best = max(acc, key=lambda n: acc[n])
+            beats_paper = acc[best] > PAPER_BEST[lv]
+            text = (f"{lv}: best {family} {best} {acc[best]:.3f} {'>' if beats_paper else '<='} the paper's best "
+                    f"{PAPER_BEST[lv]:.3f}")
+            if "random" in ok:
+                worse = [n for n in dqn if not ok[n]["vs_random"][lv][0] > 0]
+                text += f"; every {family} variant above random" if not worse else f"; not above random: {', '.join(worse)}"
+            out.append(text)
     return out
 
 

@@ -8,7 +8,12 @@ TABLE_III = {
     "dqn_global_local": {"easy": 0.4536, "medium": 0.4130, "hard": 0.3838},
 }
 # the paper's names of our systems
-PAPER_NAMES = {"random": "random", "dqn_global": "DQN(R_g)", "dqn_local": "DQN(R_l)", "dqn_global_local": "DQN(R_g+R_l)"}
+PAPER_NAMES = {"random": "random", "dqn_global": "DQN(R_g)", "dqn_local": "DQN(R_l)", "dqn_global_local": "DQN(R_g+R_l)",
+               "dqfd_global": "DQfD(R_g)", "dqfd_local": "DQfD(R_l)", "dqfd_global_local": "DQfD(R_g+R_l)"}
+# the paper's three reward variants, as trained (the paper's DQN from scratch, and ours from demonstrations):
+# Table III's goals are checked for each family present
+VARIANT_FAMILIES = {"DQN": ("dqn_global", "dqn_local", "dqn_global_local"),
+                    "DQfD": ("dqfd_global", "dqfd_local", "dqfd_global_local")}
 # the best of the paper's DQN variants at each level (what the issue asks the best variant to beat)
 PAPER_BEST = {level: max(TABLE_III[s][level] for s in ("dqn_global", "dqn_local", "dqn_global_local"))
               for level in ("easy", "medium", "hard")}
