@@ -1,6 +1,7 @@
 """tools/train_reward_variants.sh: the paper's three rewards as DQfD continuations of a finished student. Its
 refusals come before anything is written, and the answering systems point at the folders it writes."""
 
+import os
 import subprocess
 from pathlib import Path
 
@@ -10,8 +11,6 @@ REPO = Path(__file__).parents[1]
 
 
 def run_variants(*args, **env):
-    import os
-
     return subprocess.run(["bash", str(REPO / "tools/train_reward_variants.sh"), *map(str, args)],
                           env={**os.environ, **env}, capture_output=True, text=True, timeout=120)
 

@@ -34,8 +34,9 @@ from mqa_rl import keys
 from mqa_rl.data.dataset import LEVELS, MQADataset, dataset_fingerprint
 from mqa_rl.data.questions import QUESTION_TYPES
 from mqa_rl.collectors.store import EpisodeStore
+from mqa_rl.envs.factory import make_mqa_env
 from mqa_rl.envs.sapien_bin import SapienBinEnv
-from mqa_rl.modules.frozen_policies import env_with_memory, is_deterministic, make_frozen_policy, resolve_checkpoint
+from mqa_rl.modules.frozen_policies import is_deterministic, make_frozen_policy, resolve_checkpoint
 from mqa_rl.transforms.episode_stats import mean_target_chi
 
 SCHEMA = 1
@@ -132,7 +133,7 @@ _WORKER: dict = {}
 
 
 def _build(dataset_root: str, env_kwargs: dict, spec: dict, run: dict) -> dict:
-    env = env_with_memory(SapienBinEnv(dataset_root, split=None, **env_kwargs), spec)
+    env = make_mqa_env(dataset_root, split=None, push_memory=spec.get("push_memory"), **env_kwargs)   # resolved spec
     policy, exploration = make_frozen_policy(spec, env, env_kwargs["max_pushes"])
     return dict(env=env, policy=policy, exploration=exploration, run=run)
 

@@ -9,7 +9,7 @@ mapping), frozen: nothing here learns.
                                             stop_margin: m stops only when Q(stop) >= best push + m (StopMargin);
                                             stop_critic: <recipes/fit_stop.py out_dir> stops as it predicts;
                                             push_memory: r (default the run's env.push_memory; < 0: none) runs it
-                                            in an env with PushMemory(r), as it was trained (``env_with_memory``)
+                                            in an env with PushMemory(r), as it was trained (``make_mqa_env(push_memory=r)``)
     {kind: privileged, lookahead: 1}        the oracle reference (reads the simulator; see privileged_policy;
                                             order: visible_first, image_visible: true = the visible teacher)
 
@@ -29,7 +29,6 @@ from omegaconf import OmegaConf
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 from torchrl.checkpoint import CheckpointRotation
-from torchrl.envs import TransformedEnv
 from torchrl.envs.utils import ExplorationType
 
 from mqa_rl import keys
@@ -41,7 +40,7 @@ from mqa_rl.modules.q_override import best_allowed_push, take_action
 from mqa_rl.modules.trained_policy import load_greedy
 from mqa_rl.modules.random_policy import RandomMQAPolicy
 from mqa_rl.training.checkpoint import newest_checkpoint
-from mqa_rl.transforms.push_memory import PushMemory, memory_radius
+from mqa_rl.transforms.push_memory import memory_radius
 
 KINDS = ("random", "random_masked", "none", "dqn", "privileged")
 PRIVILEGED_OPTIONS = ("min_visible_px", "min_visible_fraction", "max_tries_per_occluder", "lookahead", "order",
@@ -155,12 +154,6 @@ def resolve_checkpoint(spec: Mapping) -> dict:
 def is_deterministic(spec: Mapping) -> bool:
     kind = spec["kind"]
     return kind in ("none", "privileged") or (kind == "dqn" and float(spec.get("epsilon", 0.0)) == 0.0)
-
-
-def env_with_memory(env, spec: Mapping):
-    """``env`` wrapped in the push memory a resolved spec asks for (``resolve_checkpoint``), else itself."""
-    radius = spec.get("push_memory")
-    return env if radius is None else TransformedEnv(env, PushMemory(int(radius)))
 
 
 def make_frozen_policy(spec: Mapping, env, max_pushes: int):
