@@ -36,8 +36,7 @@ done
 read -r SEED BASE_FRAMES < <(python -c "
 import sys; from omegaconf import OmegaConf
 c = OmegaConf.load(sys.argv[1]); print(c.seed, c.collector.total_frames)" "$STUDENT/dqn/config.yaml")
-start=$SECONDS
-step() { echo "=== [$(( (SECONDS - start) / 60 )) min $(( (SECONDS - start) % 60 )) s] $*"; }
+. tools/policy_steps.sh
 for v in ${MQA_VARIANTS:-global local global_local}; do
   run="$OUT/$v"
   if ! compgen -G "$run/dqn/checkpoints/checkpoint-*" > /dev/null; then
@@ -51,14 +50,7 @@ for v in ${MQA_VARIANTS:-global local global_local}; do
   python recipes/train_dqn.py dataset=data/mqa "reward=$v" profile=cpu_quick_student \
     "demos.path=[$STUDENT/demos_0,$STUDENT/demos_1]" "seed=$SEED" "out_dir=$run/dqn" resume=true \
     "collector.total_frames=$(( BASE_FRAMES + FRAMES ))" "$@"
-  if [ ! -f "$run/stop/stop_critic.pt" ]; then
-    step "DQN($v): its stop, from its own pushes on the train split -> $run/stop"
-    python recipes/fit_stop.py "run=$run/dqn" episodes_per_level=100 "out_dir=$run/stop"
-  fi
-  if [ -n "${MQA_EVAL:-}" ]; then
-    step "DQN($v): test split, greedy + learned stop vs random, $MQA_EVAL episodes per level -> $run/eval"
-    python recipes/evaluate_policy.py "run=$run/dqn" "stop_critic=$run/stop" "episodes_per_level=$MQA_EVAL" \
-      'policies=[greedy,random]' video_episodes=0 "out_dir=$run/eval" ${MQA_BASELINE:+"baseline_from=$MQA_BASELINE"}
-  fi
+  fit_own_stop "$run"
+  evaluate_on_test "$run"
 done
 step "done: $OUT/{${MQA_VARIANTS:-global local global_local}}/{dqn,stop}"

@@ -28,8 +28,7 @@ esac
 ROOT=${1:-runs/student}
 SEED=${2:-0}
 shift $(( $# < 2 ? $# : 2 ))
-start=$SECONDS
-step() { echo "=== [$(( (SECONDS - start) / 60 )) min $(( (SECONDS - start) % 60 )) s] $*"; }
+. tools/policy_steps.sh
 # a ROOT may already hold demonstrations: only of the teacher asked for (reused), never silently of the other
 for k in 0 1; do
   demos="$ROOT/demos_$k/demos.json"
@@ -61,15 +60,7 @@ step "the geometric student: imitation updates -> $ROOT/dqn"
 python recipes/train_dqn.py dataset=data/mqa reward=global profile=cpu_quick_student \
   "demos.path=[$ROOT/demos_0,$ROOT/demos_1]" "seed=$SEED" "out_dir=$ROOT/dqn" resume=true "$@"
 
-if [ ! -f "$ROOT/stop/stop_critic.pt" ]; then
-  step "its stop, from its own pushes on the train split -> $ROOT/stop"
-  python recipes/fit_stop.py "run=$ROOT/dqn" episodes_per_level=100 "out_dir=$ROOT/stop"
-fi
+fit_own_stop "$ROOT"
 step "trained: $ROOT/dqn with $ROOT/stop"
-
-if [ -n "${MQA_EVAL:-}" ]; then
-  step "test split: greedy + learned stop vs random, $MQA_EVAL episodes per level -> $ROOT/eval"
-  python recipes/evaluate_policy.py "run=$ROOT/dqn" "stop_critic=$ROOT/stop" "episodes_per_level=$MQA_EVAL" \
-    'policies=[greedy,random]' video_episodes=0 "out_dir=$ROOT/eval" ${MQA_BASELINE:+"baseline_from=$MQA_BASELINE"}
-fi
+evaluate_on_test "$ROOT"
 step "done"
