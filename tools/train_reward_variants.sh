@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The paper's three reward variants as DQN from demonstrations (DQfD): each one continues a finished imitation
 # student (tools/train_student.sh ROOT SEED) with DQN on its own reward — R_g (global), R_l (local), R_g+R_l
-# (global_local) — the demonstrations' margin loss beside every update, as DQfD does; then its stop is learnt
+# (global_local) — the demonstrations' loss beside every update, as DQfD does; then its stop is learnt
 # from its own pushes like the student's. The paper's variants trained from scratch on our CPU budget do not
 # uncover the targets (README, "Where the policy stands"); these start from a policy that does. The RL phase is
 # gentle (profile=cpu_dqfd_variant: lr 1e-4, demonstration weight 2.0): at the student's 5e-4 / 0.5 it undid the
