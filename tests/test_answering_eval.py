@@ -170,3 +170,4 @@ def test_the_goals_are_checked_for_each_family_of_reward_variants():
     assert lines[3].startswith("easy: best DQfD dqfd_global 0.600 > the paper's best 0.477")
     assert lines[3].endswith("every DQfD variant above random")
     assert verdict({"systems": {"random": system(0.4, 0.0)}})[0].startswith("no DQN system evaluated yet")
+    assert "dqfd_global_local" in verdict({"systems": {"random": system(0.4, 0.0)}})[0]   # says which names count

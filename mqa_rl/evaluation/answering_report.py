@@ -83,8 +83,9 @@ def verdict(results: dict, qtype: str = "counting") -> list[str]:
     families = {f: [n for n in names if n in ok] for f, names in VARIANT_FAMILIES.items()}
     families = {f: names for f, names in families.items() if names}
     if not families:
+        named = ", ".join(n for names in VARIANT_FAMILIES.values() for n in names)
         return ["no DQN system evaluated yet: the goals (every DQN variant beats random, the best beats the paper's "
-                "best) cannot be checked"]
+                f"best) are checked on the systems named {named}; other systems are tabled, not checked"]
     out = []
     for family, dqn in families.items():
         for lv in LEVELS:
