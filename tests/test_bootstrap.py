@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -88,3 +90,18 @@ def test_bootstrap_names_no_mirror_host():
     root = SCRIPT.parents[1]
     for path in [root / "tools" / "bootstrap.sh", SCRIPT, root / "README.md", root / "docs" / "platform.md"]:
         assert "debian.org" not in path.read_text(), path
+
+
+def test_bootstrap_refuses_a_full_disk_before_installing(tmp_path):
+    """Too little free space is named up front; no package is installed and no stamp written,
+    so the next run (with space freed) installs from scratch."""
+    root = Path(__file__).resolve().parents[1]
+    venv = tmp_path / "venv"
+    env = {**os.environ, "PYTHON": sys.executable, "MQA_VENV": str(venv), "MQA_MIN_FREE_GB": "1000000"}
+    out = subprocess.run(["bash", str(root / "tools" / "bootstrap.sh")], env=env,
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 1
+    assert "GB free on the disk of" in out.stderr and "installing the packages needs about 1000000 GB" in out.stderr
+    assert "installing pinned packages" not in out.stderr
+    assert not (venv / ".mqa-lock-stamp").exists()
+    assert not (venv / "pip-install.log").exists()

@@ -21,6 +21,15 @@ if [ ! -x "$VENV/bin/python" ]; then
     "$PY" -m venv "$VENV"
 fi
 if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
+    # The pinned stack takes ~7 GB once installed (torch with its CUDA wheels, sapien, ...): check
+    # first, so that a full disk is named as such instead of surfacing as a pip OSError mid-install.
+    need_gb="${MQA_MIN_FREE_GB:-9}"
+    free_gb=$(( $(df -Pk "$VENV" | awk 'NR==2 {print $4}') / 1048576 ))
+    if [ "$free_gb" -lt "$need_gb" ]; then
+        log "ERROR: only ${free_gb} GB free on the disk of $VENV; installing the packages needs about ${need_gb} GB."
+        log "Free some space (or point MQA_VENV at a larger disk) and run this script again."
+        exit 1
+    fi
     log "installing pinned packages (first run: several GB, a few minutes; log: $VENV/pip-install.log)"
     # Lines of the lock marked "# no-deps" are installed without their dependencies: of mani_skill
     # (the arm's robot assets, the 'arm' extra) only the asset files are used, not its heavy stack.
@@ -32,6 +41,9 @@ if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
            && "$VENV/bin/python" -m pip install --no-deps -e "$ROOT"; } > "$VENV/pip-install.log" 2>&1; then
         tail -n 30 "$VENV/pip-install.log" >&2
         log "ERROR: package installation failed (full log: $VENV/pip-install.log)"
+        if grep -q 'No space left on device' "$VENV/pip-install.log"; then
+            log "The disk filled up during the install: free some space and run this script again."
+        fi
         exit 1
     fi
     echo "$want" > "$stamp"
