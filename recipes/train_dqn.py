@@ -48,6 +48,7 @@ from mqa_rl.losses.target_map import TargetMapLoss
 from mqa_rl.modules.pretrained_recognition import load_recognition
 from mqa_rl.modules.push_policy import make_explorer, make_push_qnet, make_q_actor
 from mqa_rl.training.checkpoint import TrainingCheckpoint
+from mqa_rl.training.resume_guard import refuse_changed_config
 from mqa_rl.training.run_logger import RunLogger, trim_scalars
 from mqa_rl.training.signals import exit_on_sigterm
 
@@ -220,6 +221,8 @@ def train(cfg: DictConfig) -> dict:
         if not cfg.resume:
             raise FileExistsError(f"{out} already holds checkpoints ({ckpt.latest().name}): pass resume=true to "
                                   f"continue that run, or choose another out_dir")
+        refuse_changed_config(out / "config.yaml", OmegaConf.to_container(cfg, resolve=True),
+                              cfg.get("resume_allow_changes", False))
         path = ckpt.load()
         state.setdefault("demo_pretrain_updates", 0)       # checkpoints older than the pre-training counters
         state.setdefault("demo_pretrain_seconds", 0.0)

@@ -278,9 +278,11 @@ def test_pretrain_then_train_dqn_from_the_recognition_file(small_dataset_dir, tm
     assert (run / "csv" / "scalars" / "train" / "demo_stop_agreement.csv").exists()
     # a lengthened pre-training continues from the finished run's checkpoint: the 3 updates done are not
     # repeated, their log rows are kept (they are stepped by update, not frame), and a third call has nothing to do
-    longer = [*train, "demos.pretrain_updates=5", "demos.checkpoint_updates=1", "demos.max_states=4", "resume=true"]
+    longer = [*train, "demos.pretrain_updates=5", "demos.checkpoint_updates=1", "demos.max_states=4", "resume=true",
+              "resume_allow_changes=true"]          # fewer demonstrations from here on: a deliberate change
     out = subprocess.run([sys.executable, *longer], capture_output=True, text=True, timeout=600, env=ENV, cwd=tmp_path)
     assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-3000:]
+    assert "changed settings:\n  demos.max_states: None -> 4" in out.stdout
     assert "3 demonstration pre-training updates" in out.stdout and "'demo_pretrain_updates': 5" in out.stdout
     assert "demonstrations: 4 states" in out.stdout                     # demos.max_states: the first 4 of 12
     assert "pre-training 4/5" not in out.stdout and "demonstration pre-training 5/5" in out.stdout

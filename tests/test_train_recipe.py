@@ -47,6 +47,12 @@ def test_tiny_training_run_evaluation_and_curves(small_dataset_dir, tmp_path):
     # the same out_dir again without resume=true is refused, not overwritten
     again = _run(TRAIN, "profile=smoke", f"dataset={small_dataset_dir}", f"out_dir={run}", cwd=tmp_path, ok=False)
     assert again.returncode != 0 and "resume=true" in again.stderr
+    # resuming it under another learning rate is refused, naming the setting (a longer run is not a change)
+    changed = _run(TRAIN, "profile=smoke", f"dataset={small_dataset_dir}", f"out_dir={run}", "resume=true",
+                   "optim.lr=0.123", "collector.total_frames=40", cwd=tmp_path, ok=False)
+    assert changed.returncode != 0 and "optim.lr: 0.0005 -> 0.123" in changed.stderr
+    assert "resume_allow_changes=true" in changed.stderr and "total_frames: " not in changed.stderr
+    assert list((run / "checkpoints").glob("checkpoint-*32")) and not list((run / "checkpoints").glob("checkpoint-*40"))
     # greedy vs random on the test split, and the Fig. 7 curves
     ev = tmp_path / "eval"
     _run(str(ROOT / "recipes" / "evaluate_policy.py"), f"run={run}", "episodes_per_level=2", "difficulties=[easy]",

@@ -10,7 +10,7 @@
 #   bash tools/train_reward_variants.sh STUDENT_ROOT [OUT_ROOT] [FRAMES] [train_dqn overrides ...]
 #     STUDENT_ROOT  a tools/train_student.sh folder (its dqn/ imitation run and demos_{0,1}/)
 #     OUT_ROOT      default runs/reward_variants: OUT_ROOT/<variant>/{dqn,stop}, OUT_ROOT/<variant>/eval with MQA_EVAL
-#     FRAMES        environment frames of DQN per variant after the imitation (default 1000)
+#     FRAMES        environment frames of DQN per variant after the imitation (default 600: 208 updates, the measured setting)
 #   MQA_VARIANTS="global local global_local" (default: all three), MQA_EVAL=<episodes per level> and
 #   MQA_BASELINE=<an earlier evaluation's out_dir> as in tools/train_student.sh.
 #
@@ -22,7 +22,7 @@ set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 STUDENT=${1:?usage: bash tools/train_reward_variants.sh STUDENT_ROOT [OUT_ROOT] [FRAMES] [overrides ...]}
 OUT=${2:-runs/reward_variants}
-FRAMES=${3:-1000}
+FRAMES=${3:-600}
 shift $(( $# < 3 ? $# : 3 ))
 case "$FRAMES" in ''|*[!0-9]*) echo "FRAMES must be a positive integer, got '$FRAMES'" >&2; exit 2 ;; esac
 [ "$FRAMES" -gt 0 ] || { echo "FRAMES must be a positive integer, got '$FRAMES'" >&2; exit 2; }
@@ -45,7 +45,9 @@ for v in ${MQA_VARIANTS:-global local global_local}; do
     step "DQN($v) starts from $STUDENT/dqn"
     mkdir -p "$run"
     rm -rf "$run/.dqn.tmp" && mkdir "$run/.dqn.tmp"
-    cp -r "$STUDENT/dqn/checkpoints" "$STUDENT/dqn/csv" "$STUDENT/dqn/config.yaml" "$run/.dqn.tmp/"
+    # not its config.yaml: the variant continues under its own settings (train_dqn.py writes them), and a
+    # later resume of the variant is checked against those, not the student's
+    cp -r "$STUDENT/dqn/checkpoints" "$STUDENT/dqn/csv" "$run/.dqn.tmp/"
     mv "$run/.dqn.tmp" "$run/dqn"
   fi
   step "DQN($v): $FRAMES frames with its reward beside the demonstrations -> $run/dqn"

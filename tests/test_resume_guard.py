@@ -1,0 +1,43 @@
+"""A resumed run must be the same experiment: changed settings are named and refused unless allowed."""
+
+from __future__ import annotations
+
+import pytest
+from omegaconf import OmegaConf
+
+from mqa_rl.training.resume_guard import config_changes, refuse_changed_config
+
+RUN = {"seed": 0, "resume": False, "optim": {"lr": 5e-4}, "reward": {"name": "global", "beta": [1.0, 0.5]},
+       "collector": {"total_frames": 600, "num_workers": 2}, "logger": {"wandb": True}, "out_dir": "runs/a"}
+
+
+def _with(**changes) -> dict:
+    cfg = OmegaConf.create(RUN)
+    for key, value in changes.items():
+        OmegaConf.update(cfg, key.replace("__", "."), value)
+    return OmegaConf.to_container(cfg)
+
+
+def test_lengthening_logging_and_paths_are_not_changes():
+    new = _with(resume=True, collector__total_frames=1200, logger__wandb=False, out_dir="runs/b")
+    assert config_changes(RUN, new) == []
+
+
+def test_every_changed_added_or_removed_setting_is_named():
+    new = _with(optim__lr=1e-4, reward__beta=[1.0, 0.2], collector__num_workers=1)
+    new["demos"] = {"weight": 2.0}
+    del new["seed"]
+    assert config_changes(RUN, new) == ["collector.num_workers: 2 -> 1", "demos.weight: '(unset)' -> 2.0",
+                                        "optim.lr: 0.0005 -> 0.0001", "reward.beta: [1.0, 0.5] -> [1.0, 0.2]",
+                                        "seed: 0 -> '(unset)'"]
+
+
+def test_refused_unless_allowed(tmp_path, capsys):
+    saved = tmp_path / "config.yaml"
+    assert refuse_changed_config(saved, _with(optim__lr=1.0)) == []          # no saved config: nothing to compare
+    OmegaConf.save(OmegaConf.create(RUN), saved)
+    assert refuse_changed_config(saved, _with(collector__total_frames=900)) == []
+    with pytest.raises(ValueError, match=r"(?s)optim\.lr: 0\.0005 -> 1\.0.*resume_allow_changes=true"):
+        refuse_changed_config(saved, _with(optim__lr=1.0))
+    assert refuse_changed_config(saved, _with(optim__lr=1.0), allow=True) == ["optim.lr: 0.0005 -> 1.0"]
+    assert "continuing under changed settings" in capsys.readouterr().out
