@@ -65,6 +65,43 @@ def test_one_update_lowers_the_td_error_on_a_fixed_batch(function, double):
     assert after[keys.TD_ERROR].sum() < before[keys.TD_ERROR].sum()
 
 
+def test_double_dqn_bootstraps_from_the_best_allowed_next_push():
+    """The next state's action_mask binds the online argmax of double DQN: with one push allowed there,
+    the TD target is r + γ Q_target(s', that push), not the unmasked maximum."""
+    actor, loss, _, _ = learner(double_dqn=True)
+    batch = compact_transitions(transitions(4))
+    with torch.no_grad():
+        q = actor(batch.exclude("next").clone())[keys.ACTION_VALUE]
+        q_next = actor(batch["next"].clone())[keys.ACTION_VALUE]           # target = online at the start
+    allowed = batch["next", keys.ACTION_MASK][0].nonzero().squeeze(-1)
+    only = allowed[q_next[:, allowed].mean(0).argmin()]                    # never the unmasked argmax
+    assert (q_next.argmax(-1) != only).all()
+    batch["next", keys.ACTION_MASK].zero_()
+    batch["next", keys.ACTION_MASK][:, only] = True
+    loss(batch)
+    r = batch["next", keys.REWARD].squeeze(-1)
+    chosen = q.gather(-1, batch[keys.ACTION].unsqueeze(-1)).squeeze(-1)
+    expected = (chosen - (r + 0.6 * q_next[:, only])) ** 2
+    assert torch.allclose(batch[keys.TD_ERROR].squeeze(-1), expected, rtol=1e-4, atol=1e-6)
+
+
+def test_soft_target_update_moves_the_target_by_tau():
+    _, loss, updater, opt = learner(target_update={"kind": "soft", "tau": 0.25})
+    online = loss.value_network_params.flatten_keys()
+    target = loss.target_value_network_params.flatten_keys()
+    name = next(k for k in online.keys() if k.endswith("weight"))
+    before = target[name].clone()
+    out = loss(compact_transitions(transitions(4)))
+    opt.zero_grad()
+    out["loss"].backward()
+    opt.step()
+    updater.step()
+    moved = loss.target_value_network_params.flatten_keys()[name]
+    now = loss.value_network_params.flatten_keys()[name]
+    assert not torch.equal(now, before)
+    assert torch.allclose(moved, 0.75 * before + 0.25 * now, atol=1e-6)
+
+
 def test_priorities_change_after_an_update(tmp_path):
     _, loss, updater, opt = learner()
     rb = make_replay_buffer({"size": 32, "batch_size": 8, "alpha": 0.6, "beta_init": 0.4}, tmp_path / "rb")

@@ -188,3 +188,49 @@ def test_collector_workers_shut_down_when_the_loop_fails(small_dataset_dir):
     for p in procs:
         p.join(30)
         assert not p.is_alive()
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+def test_collector_workers_act_with_the_synced_weights(small_dataset_dir):
+    """After the learner changes the Q-network and calls update_policy_weights_(), the worker processes'
+    greedy pushes are the new network's (computed here on the observations they return), not the old one's."""
+    import copy
+
+    import torch
+
+    from mqa_rl import keys
+    from mqa_rl.collectors.factory import make_collector, running
+    from mqa_rl.envs import actions
+    from mqa_rl.modules.push_policy import make_explorer, make_push_qnet, make_q_actor
+    from torchrl.data import Categorical
+
+    torch.manual_seed(0)
+    net = make_push_qnet({"trunk": "light", "light_channels": [8, 8, 16, 16], "fuse_channels": [16, 8],
+                          "head_channels": [8], "question_dim": 8, "head_context": 1, "coords": True},
+                         vocab_size=64, camera_distance=0.9)
+    spec = Categorical(actions.NUM_ACTIONS)
+    actor = make_q_actor(net, spec)
+    policy = make_explorer(actor, spec, eps_init=0.0, eps_end=0.0, annealing_frames=1)     # greedy
+    env_kwargs = {"dataset": str(small_dataset_dir), "split": None, "difficulties": ["easy"], "max_pushes": 3}
+    coll = make_collector({"kind": "multi_sync", "num_workers": 2, "frames_per_batch": 6, "learner_threads": 1},
+                          policy, env_kwargs, total_frames=12)
+    n = torch.get_num_threads()
+    try:
+        with running(coll):
+            batches = iter(coll)
+            next(batches)
+            old = copy.deepcopy(actor)
+            with torch.no_grad():
+                for p in net.parameters():
+                    p.add_(torch.randn_like(p))
+            coll.update_policy_weights_()
+            data = next(batches).reshape(-1)
+    finally:
+        torch.set_num_threads(n)
+    obs = data.select(keys.RGB, keys.DEPTH, keys.QUESTION, keys.ACTION_MASK)
+    with torch.no_grad():
+        new_choice = actor(obs.clone())[keys.ACTION]
+        old_choice = old(obs.clone())[keys.ACTION]
+    assert torch.equal(data[keys.ACTION], new_choice)
+    assert not torch.equal(data[keys.ACTION], old_choice)
