@@ -66,6 +66,17 @@ def missing(reason: str, command: str) -> dict:
     return {"status": "missing", "reason": f"{reason}; run: `{command}`", "command": command}
 
 
+def policy_command(name: str, run: str) -> str:
+    """The command that trains system ``name``'s policy into ``run``: a DQfD variant continues a student
+    (tools/train_reward_variants.sh writes OUT/<variant>/{dqn,stop}), anything else is a train_dqn.py run."""
+    path = Path(run)
+    variant = name.removeprefix("dqfd_")
+    if name.startswith("dqfd_") and path.name == "dqn" and path.parent.name == variant:
+        return (f"bash tools/train_student.sh runs/student 1 && MQA_VARIANTS={variant} "
+                f"bash tools/train_reward_variants.sh runs/student {path.parents[1]}")
+    return f"python recipes/train_dqn.py reward=<variant> out_dir={run}"
+
+
 def evaluate_system(cfg: DictConfig, ds: MQADataset, name: str, plan_sha: str) -> tuple[dict, TensorDict | None, torch.Tensor | None]:
     """(result, test records, right [N]) of one system; records and right are None when it is missing."""
     spec = system_spec(OmegaConf.to_container(cfg.systems, resolve=True), name)
@@ -73,8 +84,7 @@ def evaluate_system(cfg: DictConfig, ds: MQADataset, name: str, plan_sha: str) -
     try:
         spec = resolve_checkpoint(spec)
     except FileNotFoundError:
-        return missing(f"no trained policy in {spec['run']}",
-                       f"python recipes/train_dqn.py reward=<variant> out_dir={spec['run']}"), None, None
+        return missing(f"no trained policy in {spec['run']}", policy_command(name, spec["run"])), None, None
     store = Path(cfg.rollouts_dir) / name / "test"
     vqa_paths = [Path(d) / name / CHECKPOINT_NAME for d in vqa_dirs(cfg)]
     train_cmd = (f"python recipes/collect_rollouts.py system={name} questions={q} && "

@@ -76,12 +76,15 @@ def test_evaluate_writes_table3_and_names_what_is_missing(small_dataset, trained
     evaluate = load_recipe("evaluate")
     results = evaluate.evaluate(compose_recipe_config("evaluate", [
         *overrides, "progress=false", f"systems.dqn_local.run={tmp_path / 'no_run'}",
-        "report=[random,no_manipulation,dqn_local,dqn_global]"]))
+        f"systems.dqfd_local.run={tmp_path / 'variants' / 'local' / 'dqn'}",
+        "report=[random,no_manipulation,dqn_local,dqn_global,dqfd_local]"]))
     assert list(test_store.glob("chunk-*"))
     out = root / "report" / "counting-eqa"
     table = (out / "table3.md").read_text()
     assert "| random |" in table and "0.277 / 0.308 / 0.274" in table                 # the paper's beside ours
     assert "| dqn_local (DQN(R_l)) | missing" in table and "train_dqn.py" in table
+    # a DQfD variant is made by continuing a student, and its hint says so
+    assert f"MQA_VARIANTS=local bash tools/train_reward_variants.sh runs/student {tmp_path / 'variants'}" in table
     assert "answer prior" in table and "no DQN system evaluated yet" in table
     sys_res = results["systems"]
     assert sys_res["random"]["status"] == "ok" and sys_res["dqn_global"]["status"] == "missing"

@@ -118,3 +118,22 @@ def test_the_shipped_vqa_is_the_demos_default_and_answers_a_counting_question(sm
     frame = torch.full((1, 224, 224, 3), 128, dtype=torch.uint8)
     probs = model.answer_probs(model.tokenize(["How many cans are there in the bin?"]), frame, frame)
     assert probs.shape == (1, len(model.answers)) and torch.allclose(probs.sum(-1), torch.ones(1))
+
+
+@pytest.mark.parametrize("name, head_width", [("vqa_encoder", 0), ("vqa_encoder_scenes", 64)])
+def test_the_shipped_encoders_load_and_encode(name, head_width):
+    """checkpoints/vqa_encoder{,_scenes}: what `encoder.weights=` points users at loads as the encoder it was
+    pretrained as (the scenes one with its context heads) and gives the VQA's bottleneck and class maps."""
+    from pathlib import Path
+
+    from mqa_rl.modules.vqa_encoder import load_encoder, standardise
+
+    encoder, meta = load_encoder(Path(__file__).parents[1] / "checkpoints" / name / "encoder.pt")
+    assert encoder.head_width == head_width and encoder.out_shape == (32, 10, 10)
+    frame = torch.randint(0, 256, (2, 3, 224, 224), dtype=torch.uint8)
+    with torch.no_grad():
+        assert encoder.eval().encode(frame).shape == (2, 32, 10, 10)
+        maps = encoder.class_maps(standardise(frame, encoder.image_size))
+    k = encoder.num_classes
+    assert maps.shape == (2, 2 * k, 24, 24) and torch.allclose(maps[:, :k].exp().sum(1), torch.ones(2, 24, 24), atol=1e-4)
+    assert (maps[:, k:] >= 0).all()                                      # densities

@@ -8,7 +8,7 @@
 #   5. Table III as measured (+ per type, policies, Fig. 7)           -> runs/main/report
 #   6. videos of greedy DQN(R_l) episodes with Q-map overlays         -> runs/main/videos
 # Every step resumes or skips what is done, so an interrupted run continues where it stopped.
-# Overrides for a smaller run (the tests use them): MQA_ROOT, MQA_EXTRA (all answering recipes),
+# Overrides for a smaller or relocated run: MQA_ROOT, MQA_EXTRA (all answering recipes),
 # MQA_DQN (train_dqn.py), MQA_PRETRAIN, MQA_VQA (extra arguments of those recipes).
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
