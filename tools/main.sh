@@ -4,13 +4,14 @@
 #   2. run two random-policy episodes on it and write their videos next to a printed log;
 #   3. the whole MQA pipeline at a quick CPU scale (tools/answering_pipeline.sh): DQN(R_l) briefly,
 #      rollouts of four systems, VQA encoder pretraining, one VQA per system, Table III, videos;
-#   4. the shipped DQN(R_l) (checkpoints/dqn_local, trained at the default CPU config): greedy vs random
-#      on 5 test questions per level, with a video per level (runs/main/shipped_dqn_local).
+#   4. the shipped learned policy (checkpoints/dqn_geometric_student with its learned stop, the one that beats
+#      random at every level: README "Where the policy stands"): greedy vs random on 5 test questions per
+#      level, with a video per level and Q-map overlays (runs/main/shipped_student).
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 . tools/bootstrap.sh
 python recipes/make_dataset.py
 python recipes/random_episodes.py
 bash tools/answering_pipeline.sh
-python recipes/evaluate_policy.py run=checkpoints/dqn_local episodes_per_level=5 'policies=[greedy,random]' \
-  video_episodes=1 out_dir=runs/main/shipped_dqn_local
+python recipes/evaluate_policy.py run=checkpoints/dqn_geometric_student stop_critic=checkpoints/stop_geometric_student \
+  episodes_per_level=5 'policies=[greedy,random]' video_episodes=1 out_dir=runs/main/shipped_student
