@@ -111,16 +111,20 @@ def time_update(model: dict, batch: int, repeats: int, device: torch.device = to
 
 
 def e2e(dataset: str, frames: int) -> None:
-    """Short training runs (smoke profile, but 10 pushes per episode and the default light trunk)."""
+    """Short training runs (smoke profile, but 10 pushes per episode and the default light trunk).
+
+    Every collector gets the same learner work per frame (8 frames per batch, 4 updates of 16: 0.5
+    updates per frame, the default's ratio), so the loops differ only in how they collect."""
     root = Path(__file__).parents[1]
+    frames_per_batch, updates_per_batch = 8, 4
     for kind, workers in (("single", 1), ("multi_sync", 2), ("multi_async", 1)):
         with tempfile.TemporaryDirectory() as out:
             args = [sys.executable, str(root / "recipes" / "train_dqn.py"), "profile=smoke", f"dataset={dataset}",
                     f"out_dir={out}", f"collector={kind}", f"collector.num_workers={workers}",
-                    f"collector.total_frames={frames}", f"collector.frames_per_batch={8 * workers}",
+                    f"collector.total_frames={frames}", f"collector.frames_per_batch={frames_per_batch}",
                     "env.max_pushes=10", "eval.episodes=1", f"eval.interval_frames={frames}",
                     f"checkpoint.interval_frames={frames}", "buffer.size=256", "buffer.batch_size=16",
-                    "loss.updates_per_batch=4"]
+                    f"loss.updates_per_batch={updates_per_batch}"]
             t0 = time.perf_counter()
             run = subprocess.run(args, capture_output=True, text=True)
             wall = time.perf_counter() - t0
@@ -134,7 +138,8 @@ def e2e(dataset: str, frames: int) -> None:
             print(f"{kind:>11} x{workers}: {frames} frames, {wall:.0f} s wall incl. start-up; collection "
                   f"{statistics.median(rows['time/env_steps_per_s']):.2f} env steps/s (median over batches), "
                   f"updates {statistics.median(rows['time/updates_per_s']):.2f}/s (batch 16), "
-                  f"loop end to end {rows['time/loop_env_steps_per_s'][-1]:.2f} env steps/s (0.5 updates/frame)")
+                  f"loop end to end {rows['time/loop_env_steps_per_s'][-1]:.2f} env steps/s "
+                  f"({updates_per_batch / frames_per_batch:g} updates/frame)")
 
 
 def mask_effect(dataset: str, pushes: int) -> None:
