@@ -48,7 +48,7 @@ from mqa_rl.training.vqa_data import (DIHEDRAL, Batches, encode_store, load_answ
 
 # validation metric that picks the kept checkpoint -> its score (higher is better)
 SELECT = {"accuracy": lambda m: m["val/accuracy"], "loss": lambda m: -m["val/loss"]}
-MODEL_OPTIONS = ("pool", "image_size", "dim", "lstm_layers", "dropout", "cell_heads")
+MODEL_OPTIONS = ("pool", "image_size", "dim", "lstm_layers", "dropout", "cell_heads", "frame_fusion")
 
 
 def check_config(cfg: DictConfig) -> None:

@@ -50,6 +50,30 @@ def test_forward_backward_and_attention_over_two_frames(pool, frozen):
     assert torch.allclose(a, b, atol=1e-5)
 
 
+def test_max_frame_fusion_takes_each_features_larger_value_and_round_trips(tmp_path):
+    """frame_fusion="max": the classifier reads q ⊙ max(v_start, v_stop), so a frame that shows more of the
+    asked class cannot be averaged away; the reported shares sum to 1; the option survives save/load."""
+    torch.manual_seed(0)
+    model = VQAModel(VOCAB, ANSWERS, pool="classes", frame_fusion="max").eval()
+    q, first, last = _batch(model)
+    f, l = model.encode_frames(first), model.encode_frames(last)
+    with torch.no_grad():
+        logits, share = model.forward_features(q, f, l)
+        qv = model.question(q)
+        v = torch.stack([model.image_fc(f, qv), model.image_fc(l, qv)], 1)
+        assert torch.allclose(logits, model.classifier(qv * v.amax(1)), atol=1e-5)
+        assert torch.allclose(share.sum(-1), torch.ones(3)) and (share >= 0).all()
+        assert torch.equal(model.forward_features(q, f, f)[1], torch.full((3, 2), 0.5))    # one frame twice: ties
+        swapped, _ = model.forward_features(q, l, f)
+    assert torch.allclose(logits, swapped, atol=1e-5)              # the order of the frames does not matter
+    loaded = load_vqa(save_vqa(model, tmp_path / "vqa.pt"))
+    assert loaded.config["frame_fusion"] == "max"
+    with torch.no_grad():
+        assert torch.allclose(loaded.forward_features(q, f, l)[0], logits, atol=1e-5)
+    with pytest.raises(ValueError, match="frame_fusion"):
+        VQAModel(VOCAB, ANSWERS, frame_fusion="sum")
+
+
 def test_answer_probs_contract_and_round_trip(tmp_path):
     torch.manual_seed(0)
     model = VQAModel(VOCAB, ANSWERS, pool="cells")

@@ -5,6 +5,12 @@
     attention  a_t = softmax_t( linear_128→1( tanh([ques_tr(q), img_tr(v_t)]) ) )   over the 2 frames
     fused      q ⊙ Σ_t a_t v_t  → MLP 64 → 64 → answers (the dataset's answer vocabulary)
 
+Frame fusion (``frame_fusion``): ``"attention"`` is EQA's weighted mean above; ``"max"`` (ours) takes
+each feature's maximum over the two frames instead. Objects do not vanish between the frames, so what
+either frame shows is evidence: a push that uncovers one target and buries another leaves I_stop's
+visible count where I_start's was, while the larger of the two counts rises (a perfect counter on the
+larger count: README "Reading both frames"); a weighted mean cannot take that maximum.
+
 Frame vector (``pool``):
 
 * ``"eqa"`` (the paper's): flatten the 32×10×10 map, linear 3200 → 64, ReLU, dropout.
@@ -58,6 +64,7 @@ VQA_FORMAT = "mqa_rl.vqa"
 VQA_VERSION = 1
 CHECKPOINT_NAME = "vqa.pt"          # what recipes/train_vqa.py writes into its out_dir
 POOLS = ("eqa", "cells", "classes")
+FUSIONS = ("attention", "max")
 TRAIN_HINT = "train one with `python recipes/train_vqa.py system=<name>` (it writes <out_dir>/vqa.pt)"
 
 
@@ -121,7 +128,7 @@ class VQAModel(nn.Module):
 
     def __init__(self, vocab, answers, *, image_size: int = 224, encoder_channels=(8, 16, 32, 32), encoder_classes: int = 21,
                  encoder_head_width: int = 0, pool: str = "eqa", dim: int = 64, lstm_layers: int = 2, dropout: float = 0.5,
-                 cell_heads: int = 4, freeze_encoder: bool = True):
+                 cell_heads: int = 4, freeze_encoder: bool = True, frame_fusion: str = "attention"):
         super().__init__()
         self.vocab = list(vocab)
         self.answers = list(answers)
@@ -129,10 +136,12 @@ class VQAModel(nn.Module):
             raise ValueError(f"a question vocabulary starts with {PAD!r}, {UNK!r}; got {self.vocab[:2]}")
         if pool not in POOLS:
             raise ValueError(f"vqa pool={pool!r}; choose one of {POOLS}")
+        if frame_fusion not in FUSIONS:
+            raise ValueError(f"vqa frame_fusion={frame_fusion!r}; choose one of {FUSIONS}")
         self.config = {"image_size": int(image_size), "encoder_channels": list(encoder_channels),
                        "encoder_classes": int(encoder_classes), "encoder_head_width": int(encoder_head_width), "pool": pool,
                        "dim": int(dim), "lstm_layers": int(lstm_layers), "dropout": float(dropout),
-                       "cell_heads": int(cell_heads), "freeze_encoder": bool(freeze_encoder)}
+                       "cell_heads": int(cell_heads), "freeze_encoder": bool(freeze_encoder), "frame_fusion": frame_fusion}
         self._stoi = {w: i for i, w in enumerate(self.vocab)}
         self.encoder = FrameEncoder(tuple(encoder_channels), image_size, encoder_classes, encoder_head_width)
         c, h, w = self.encoder.out_shape
@@ -177,7 +186,8 @@ class VQAModel(nn.Module):
         return out.reshape(*batch, *out.shape[1:])
 
     def forward_features(self, question: torch.Tensor, first: torch.Tensor, last: torch.Tensor):
-        """(logits [B, A], attention [B, 2]) from tokens [B, L] and encoder features [B, C, h, w] of both frames."""
+        """(logits [B, A], attention [B, 2]) from tokens [B, L] and encoder features [B, C, h, w] of both frames.
+        With ``frame_fusion="max"`` the "attention" is the share of features each frame supplies (ties halved)."""
         q = self.question(question)                                              # [B, D]
         frames = torch.stack([first, last], 1)                                   # [B, 2, C, h, w]
         b, t = frames.shape[:2]
@@ -187,6 +197,9 @@ class VQAModel(nn.Module):
         else:
             v = self.image_fc(flat, q.repeat_interleave(t, 0))
         v = v.view(b, t, -1)                                                     # [B, 2, D]
+        if self.config["frame_fusion"] == "max":
+            last = ((v[:, 1] > v[:, 0]).float() + 0.5 * (v[:, 1] == v[:, 0]).float()).mean(-1)   # ties split evenly
+            return self.classifier(q * v.amax(1)), torch.stack([1 - last, last], -1)
         joint = torch.cat([self.ques_tr(q).unsqueeze(1).expand(-1, t, -1), self.img_tr(v)], -1)
         attention = F.softmax(self.att(joint).squeeze(-1), dim=1)                # [B, 2]
         attended = (attention.unsqueeze(-1) * v).sum(1)
