@@ -8,7 +8,7 @@ on its training rollouts), COUNTING accuracy per level beside the paper's, with 
 
 Per system also: accuracy per question type and level, the difference to random paired by question,
 mean pushes, the targets' χ at the end and its change, and what a perfect counter would read from the
-first and last images (is the policy or the VQA the limit?) and a calibrated counter (that count on the last image
+first image, the last, and either of them (is the policy or the VQA the limit?) and a calibrated counter (that count on the last image
 mapped to the answer it most often meant in the system's training rollouts: what a count-reading VQA can reach);
 as references, the training split's
 majority answer per type and level (what a VQA blind to the images reaches). A system whose policy
@@ -126,6 +126,7 @@ def evaluate_system(cfg: DictConfig, ds: MQADataset, name: str, plan_sha: str) -
               "accuracy": ans.accuracy_table(right, records),
               "counter_first": ans.accuracy_table(ans.counter_right(sub, ds.answers, keys.FIRST), sub),
               "counter_last": ans.accuracy_table(ans.counter_right(sub, ds.answers, keys.LAST), sub),
+              "counter_either": ans.accuracy_table(ans.counter_right(sub, ds.answers, ans.EITHER), sub),
               **calibrated_counter(Path(cfg.rollouts_dir) / name / "train", sub),
               "policy": ans.policy_stats(records),
               "seconds": {"collect_or_load": round(collect_seconds, 1), "answer": round(time.perf_counter() - t1, 1)}}

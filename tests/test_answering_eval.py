@@ -38,6 +38,20 @@ def test_statistics():
     assert ans.counter_right(counting, answers).tolist() == [True, False]   # 1 target seen of 1 / none of 1
 
 
+def test_either_frame_counter_counts_each_target_seen_in_one_of_the_two_images_once():
+    """Three targets: one countable only in I_start, one only in I_stop, one in both; a fourth object is no target.
+    Either frame counts 3 (each object once), where each frame alone counts 2 and their larger count is 2."""
+    rec = TensorDict({keys.EPISODE_TARGETS: torch.tensor([[True, True, True, False]]),
+                      (keys.FIRST, keys.FRAME_VISIBLE): torch.tensor([[40.0, 0.0, 25.0, 90.0]]),
+                      (keys.LAST, keys.FRAME_VISIBLE): torch.tensor([[19.0, 60.0, 30.0, 90.0]]),
+                      keys.ANSWER_LABEL: torch.tensor([3]), keys.TYPE_LABEL: torch.tensor([0])}, batch_size=[1])
+    assert ans.countable_targets(rec, keys.FIRST).item() == ans.countable_targets(rec, keys.LAST).item() == 2
+    assert ans.countable_targets(rec, ans.EITHER).item() == 3
+    answers = ("0", "1", "2", "3", "yes", "no")
+    assert ans.counter_right(rec, answers, ans.EITHER).tolist() == [True]
+    assert ans.counter_right(rec, answers, keys.LAST).tolist() == [False]
+
+
 def test_calibrated_counter_maps_each_visible_count_to_its_most_frequent_answer_per_level():
     def records(level, seen, answer, qtype=None):
         """One target per episode, visible (30 px) or hidden (0 px)."""
@@ -106,6 +120,7 @@ def test_evaluate_writes_table3_and_names_what_is_missing(small_dataset, trained
     assert (out / "table3.png").stat().st_size > 0 and "counting" in (out / "per_type.md").read_text()
     assert "perfect counter" in (out / "policy.md").read_text() and "calibrated on I_stop" in (out / "policy.md").read_text()
     assert set(sys_res["random"]["counter_calibrated"]["counting"]) == {"easy", "hard", "all"}
+    assert "on either" in (out / "policy.md").read_text() and "counter_either" in rows[0]
     assert json.loads((out / "results.json").read_text())["systems"]["random"]["episodes"] == 4
 
 

@@ -8,7 +8,9 @@
   for every system, so the difference is paired by question, much tighter than two separate intervals).
 * ``counter_right``: whether a *perfect counter* (counts the targets with ≥ ``min_px`` visible pixels)
   would answer a COUNTING question right from the episode's first or last image: what the images
-  allow, whatever the VQA makes of them (the occlusion benchmark's rule).
+  allow, whatever the VQA makes of them (the occlusion benchmark's rule). ``frame=EITHER``: the targets
+  countable in either image (objects do not vanish between the frames, so what one frame shows is
+  evidence the pair holds: the ceiling of a VQA that reads both, ``frame_fusion="max"``).
 * ``calibrated_counter_right``: the same perfect count, mapped to the answer most often seen with that
   count at that level in the system's *training* rollouts: the best a VQA that reads only the visible
   count can do. In hard scenes the answer counts hidden objects too, so a visible count of 2 is more
@@ -31,6 +33,8 @@ from mqa_rl.data.dataset import LEVELS
 from mqa_rl.data.questions import QUESTION_TYPES
 from mqa_rl.evaluation.episode_metrics import mean_ci95
 from mqa_rl.transforms.episode_stats import COUNTABLE_PX
+
+EITHER = "either"          # countable_targets' frame: a target countable in I_start or in I_stop
 
 
 def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float, float]:
@@ -97,9 +101,11 @@ def paired_difference(right_a: torch.Tensor, records_a: TensorDict, right_b: tor
 
 
 def countable_targets(records: TensorDict, frame: str = keys.LAST, min_px: float = COUNTABLE_PX) -> torch.Tensor:
-    """Int [N]: the question's targets with ≥ ``min_px`` visible pixels in ``frame`` (what a perfect counter reads)."""
-    visible = records.get((frame, keys.FRAME_VISIBLE))
-    return ((visible >= min_px) & records.get(keys.EPISODE_TARGETS)).sum(-1)
+    """Int [N]: the question's targets with ≥ ``min_px`` visible pixels in ``frame`` (what a perfect counter reads);
+    ``frame=EITHER``: in I_start or I_stop (the same object counted once)."""
+    frames = (keys.FIRST, keys.LAST) if frame == EITHER else (frame,)
+    countable = torch.stack([records.get((f, keys.FRAME_VISIBLE)) >= min_px for f in frames]).any(0)
+    return (countable & records.get(keys.EPISODE_TARGETS)).sum(-1)
 
 
 def counter_right(records: TensorDict, answers, frame: str = keys.LAST, min_px: float = COUNTABLE_PX) -> torch.Tensor:

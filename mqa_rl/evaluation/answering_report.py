@@ -4,7 +4,7 @@ CSV and a bar chart. Every file is written atomically.
 
 ``results["systems"][name]`` is either ``{"status": "missing", "reason": ..., "command": ...}`` or
 ``{"status": "ok", "accuracy": {type: {level: {accuracy, low, high, n}}}, "vs_random": {level: [mean,
-half, n]}, "vs_prior": the same against the answer prior, "counter_first" / "counter_last" / "counter_calibrated" (absent when the training rollouts are gone): like accuracy, "policy": {level: {metric: [mean, half, n]}}}``;
+half, n]}, "vs_prior": the same against the answer prior, "counter_first" / "counter_last" / "counter_either" / "counter_calibrated" (absent when the training rollouts are gone): like accuracy, "policy": {level: {metric: [mean, half, n]}}}``;
 ``results["references"]`` maps a reference's name (the answer prior) to an accuracy table.
 """
 
@@ -114,7 +114,7 @@ def per_type_markdown(results: dict) -> str:
 def policy_markdown(results: dict) -> str:
     cols = ("pushes", "stopped", "chi_end", "chi_change")
     lines = ["| system | level | pushes | stopped | targets' χ at the end | χ end − start | perfect counter (≥ 20 px) "
-             "on I_start | on I_stop | calibrated on I_stop |", "|---|---|" + "---|" * 7]
+             "on I_start | on I_stop | on either | calibrated on I_stop |", "|---|---|" + "---|" * 8]
     for name, res in results["systems"].items():
         if res["status"] != "ok":
             continue
@@ -123,7 +123,7 @@ def policy_markdown(results: dict) -> str:
             if stats is None:
                 continue
             counters = [_acc(res.get(c, {}).get("counting", {}).get(lv))
-                        for c in ("counter_first", "counter_last", "counter_calibrated")]
+                        for c in ("counter_first", "counter_last", "counter_either", "counter_calibrated")]
             lines.append(f"| {name} | {lv} | " + " | ".join(_mean(stats[c]) for c in cols) + " | " + " | ".join(counters) + " |")
     return "\n".join(lines)
 
@@ -134,11 +134,11 @@ def rows_csv(results: dict) -> str:
     w = csv.writer(buf)
     w.writerow(["system", "status", "type", "level", "accuracy", "low", "high", "n", "paper", "vs_random", "vs_random_ci95",
                 "vs_prior", "vs_prior_ci95", "pushes", "chi_end", "chi_change", "counter_first", "counter_last",
-                "counter_calibrated"])
+                "counter_either", "counter_calibrated"])
     for name, res in results["systems"].items():
         if res["status"] != "ok":
             for lv in LEVELS:
-                w.writerow([name, "missing", "counting", lv, "", "", "", 0, TABLE_III.get(name, {}).get(lv, "")] + [""] * 10)
+                w.writerow([name, "missing", "counting", lv, "", "", "", 0, TABLE_III.get(name, {}).get(lv, "")] + [""] * 11)
             continue
         for qtype, cells in res["accuracy"].items():
             for lv, c in cells.items():
@@ -147,14 +147,15 @@ def rows_csv(results: dict) -> str:
                 pol = res["policy"].get(lv, {})
                 cf = res["counter_first"].get(qtype, {}).get(lv, {}).get("accuracy", "")
                 cl = res["counter_last"].get(qtype, {}).get(lv, {}).get("accuracy", "")
+                ce = res.get("counter_either", {}).get(qtype, {}).get(lv, {}).get("accuracy", "")
                 cc = res.get("counter_calibrated", {}).get(qtype, {}).get(lv, {}).get("accuracy", "")
                 paper = TABLE_III.get(name, {}).get(lv, "") if qtype == "counting" else ""
                 w.writerow([name, "ok", qtype, lv, c["accuracy"], c["low"], c["high"], c["n"], paper, vs[0], vs[1], vp[0], vp[1],
-                            pol.get("pushes", ("",))[0], pol.get("chi_end", ("",))[0], pol.get("chi_change", ("",))[0], cf, cl, cc])
+                            pol.get("pushes", ("",))[0], pol.get("chi_end", ("",))[0], pol.get("chi_change", ("",))[0], cf, cl, ce, cc])
     for name, table in results.get("references", {}).items():
         for qtype, cells in table.items():
             for lv, c in cells.items():
-                w.writerow([name, "reference", qtype, lv, c["accuracy"], c["low"], c["high"], c["n"]] + [""] * 11)
+                w.writerow([name, "reference", qtype, lv, c["accuracy"], c["low"], c["high"], c["n"]] + [""] * 12)
     return buf.getvalue()
 
 
