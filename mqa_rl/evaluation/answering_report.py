@@ -19,6 +19,11 @@ from pathlib import Path
 from mqa_rl.data.dataset import LEVELS
 from mqa_rl.evaluation.paper import PAPER_BEST, PAPER_NAMES, TABLE_III, VARIANT_FAMILIES
 
+# the perfect counters of a system's results, in the order policy.md and table3.csv show them
+COUNTERS = ("counter_first", "counter_last", "counter_either", "counter_calibrated")
+CSV_HEADER = ["system", "status", "type", "level", "accuracy", "low", "high", "n", "paper", "vs_random", "vs_random_ci95",
+              "vs_prior", "vs_prior_ci95", "pushes", "chi_end", "chi_change", *COUNTERS]
+
 
 def write_atomic(path: Path, text: str | bytes) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -122,8 +127,7 @@ def policy_markdown(results: dict) -> str:
             stats = res["policy"].get(lv)
             if stats is None:
                 continue
-            counters = [_acc(res.get(c, {}).get("counting", {}).get(lv))
-                        for c in ("counter_first", "counter_last", "counter_either", "counter_calibrated")]
+            counters = [_acc(res.get(c, {}).get("counting", {}).get(lv)) for c in COUNTERS]
             lines.append(f"| {name} | {lv} | " + " | ".join(_mean(stats[c]) for c in cols) + " | " + " | ".join(counters) + " |")
     return "\n".join(lines)
 
@@ -132,30 +136,26 @@ def rows_csv(results: dict) -> str:
     """One row per system × type × level: accuracy and interval, paper's value, pushes, χ, counters."""
     buf = io.StringIO()
     w = csv.writer(buf)
-    w.writerow(["system", "status", "type", "level", "accuracy", "low", "high", "n", "paper", "vs_random", "vs_random_ci95",
-                "vs_prior", "vs_prior_ci95", "pushes", "chi_end", "chi_change", "counter_first", "counter_last",
-                "counter_either", "counter_calibrated"])
+    w.writerow(CSV_HEADER)
+    pad = lambda row: row + [""] * (len(CSV_HEADER) - len(row))   # noqa: E731  (empty trailing columns)
     for name, res in results["systems"].items():
         if res["status"] != "ok":
             for lv in LEVELS:
-                w.writerow([name, "missing", "counting", lv, "", "", "", 0, TABLE_III.get(name, {}).get(lv, "")] + [""] * 11)
+                w.writerow(pad([name, "missing", "counting", lv, "", "", "", 0, TABLE_III.get(name, {}).get(lv, "")]))
             continue
         for qtype, cells in res["accuracy"].items():
             for lv, c in cells.items():
                 vs = res["vs_random"].get(lv, ("", "", 0)) if res.get("vs_random") and qtype == "counting" else ("", "", 0)
                 vp = res["vs_prior"].get(lv, ("", "", 0)) if res.get("vs_prior") and qtype == "counting" else ("", "", 0)
                 pol = res["policy"].get(lv, {})
-                cf = res["counter_first"].get(qtype, {}).get(lv, {}).get("accuracy", "")
-                cl = res["counter_last"].get(qtype, {}).get(lv, {}).get("accuracy", "")
-                ce = res.get("counter_either", {}).get(qtype, {}).get(lv, {}).get("accuracy", "")
-                cc = res.get("counter_calibrated", {}).get(qtype, {}).get(lv, {}).get("accuracy", "")
+                counters = [res.get(k, {}).get(qtype, {}).get(lv, {}).get("accuracy", "") for k in COUNTERS]
                 paper = TABLE_III.get(name, {}).get(lv, "") if qtype == "counting" else ""
                 w.writerow([name, "ok", qtype, lv, c["accuracy"], c["low"], c["high"], c["n"], paper, vs[0], vs[1], vp[0], vp[1],
-                            pol.get("pushes", ("",))[0], pol.get("chi_end", ("",))[0], pol.get("chi_change", ("",))[0], cf, cl, ce, cc])
+                            pol.get("pushes", ("",))[0], pol.get("chi_end", ("",))[0], pol.get("chi_change", ("",))[0], *counters])
     for name, table in results.get("references", {}).items():
         for qtype, cells in table.items():
             for lv, c in cells.items():
-                w.writerow([name, "reference", qtype, lv, c["accuracy"], c["low"], c["high"], c["n"]] + [""] * 12)
+                w.writerow(pad([name, "reference", qtype, lv, c["accuracy"], c["low"], c["high"], c["n"]]))
     return buf.getvalue()
 
 
