@@ -6,8 +6,8 @@
 
 The env factory is ``mqa_rl.envs.factory.make_mqa_env`` (module level, so spawned workers can
 import it). The β step counter is a shared-memory tensor handed to every worker through
-``create_env_kwargs`` (a closure would give each worker a frozen copy). A later issue can add a
-``ray`` kind (``torchrl.collectors.distributed.RayCollector``) here without touching the recipe.
+``create_env_kwargs`` (a closure would give each worker a frozen copy). A ``ray`` kind
+(``torchrl.collectors.distributed.RayCollector``) can be added here without touching the recipe.
 
 Use ``running(collector)`` around the loop: it shuts the workers down on any exit, including an
 exception or Ctrl-C, so no worker process outlives the run.

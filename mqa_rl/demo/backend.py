@@ -36,7 +36,7 @@ class DemoConfig:
     dataset: str | Path                      # a generated dataset folder (recipes/make_dataset.py)
     reward: Mapping                          # reward stack of the per-step table (recipes/conf/reward/*.yaml)
     runs: str | Path | None = "runs"         # folder searched for recipes/train_dqn.py runs
-    vqa: tuple = ()                          # VQA checkpoint paths (issue 10's load_vqa)
+    vqa: tuple = ()                          # VQA checkpoint paths (mqa_rl.modules.vqa.load_vqa)
     max_pushes: int = 10                     # pushes before an episode is cut (the env's max_pushes)
     sessions: int = 2                        # episodes running at once, one env each; others queue
     cache_dir: str | Path = "~/.cache/mqa_rl/demo"   # rendered scene images, reused by later starts

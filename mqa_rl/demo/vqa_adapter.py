@@ -1,4 +1,4 @@
-"""The one place the demo touches the VQA model (issue 10), through its published contract::
+"""The one place the demo touches the VQA model (``mqa_rl.modules.vqa``), through its published contract::
 
     from mqa_rl.modules.vqa import load_vqa
     model = load_vqa(path)              # FileNotFoundError / ValueError with a clear message
@@ -20,11 +20,12 @@ import torch
 
 log = logging.getLogger(__name__)
 NO_VQA = "no VQA checkpoint"
-TRAIN_HINT = "train one with issue 10's VQA recipe and start the demo with `vqa=[path/to/checkpoint]`"
+TRAIN_HINT = ("train one with `python recipes/train_vqa.py system=<name>` and start the demo with "
+              "`vqa=[path/to/checkpoint]`")
 
 
 def _load_vqa():
-    from mqa_rl.modules.vqa import load_vqa      # issue 10; absent in versions before it
+    from mqa_rl.modules.vqa import load_vqa      # lazily: without the module the demo still runs
 
     return load_vqa
 

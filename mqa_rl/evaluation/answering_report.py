@@ -82,7 +82,7 @@ def table3_markdown(results: dict, qtype: str = "counting") -> str:
 
 
 def verdict(results: dict, qtype: str = "counting") -> list[str]:
-    """The issue's goals, checked level by level on the measured table for each family of the three reward
+    """The answering goals, checked level by level on the measured table for each family of the three reward
     variants present (the paper's DQN, ours from demonstrations; missing systems say so)."""
     ok = {n: r for n, r in results["systems"].items() if r["status"] == "ok"}
     families = {f: [n for n in names if n in ok] for f, names in VARIANT_FAMILIES.items()}

@@ -14,6 +14,6 @@ PAPER_NAMES = {"random": "random", "dqn_global": "DQN(R_g)", "dqn_local": "DQN(R
 # Table III's goals are checked for each family present
 VARIANT_FAMILIES = {"DQN": ("dqn_global", "dqn_local", "dqn_global_local"),
                     "DQfD": ("dqfd_global", "dqfd_local", "dqfd_global_local")}
-# the best of the paper's DQN variants at each level (what the issue asks the best variant to beat)
+# the best of the paper's DQN variants at each level (what the answering goal asks the best variant to beat)
 PAPER_BEST = {level: max(TABLE_III[s][level] for s in ("dqn_global", "dqn_local", "dqn_global_local"))
               for level in ("easy", "medium", "hard")}

@@ -3,7 +3,7 @@
 The target is the simulator's per-cell class fractions (``keys.CLASS_CELLS``, channel 0 = no
 object), the prediction ``PushQNet.class_logits`` from rgb alone: a soft cross-entropy per cell.
 Dense labels on all 784 cells and 21 classes of every frame teach what the DQN reward (a few scalars
-per episode) could not in thousands of updates (README, issue 9).
+per episode) could not in thousands of updates (docs/results.md, "The paper's three variants").
 """
 
 from __future__ import annotations
