@@ -5,7 +5,7 @@
 #   3. the whole MQA pipeline at a quick CPU scale (tools/answering_pipeline.sh): DQN(R_l) briefly,
 #      rollouts of four systems, VQA encoder pretraining, one VQA per system, Table III, videos;
 #   4. the shipped learned policy (checkpoints/dqn_geometric_student with its learned stop, the one that beats
-#      random at every level: README "Where the policy stands"): greedy vs random on 5 test questions per
+#      random at every level: docs/results.md "Where the policy stands"): greedy vs random on 5 test questions per
 #      level, with a video per level and Q-map overlays (runs/main/shipped_student).
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The VQA encoder pretrained on more scenes than the dataset's 70 training ones (README, "Which class is the
+# The VQA encoder pretrained on more scenes than the dataset's 70 training ones (docs/results.md, "Which class is the
 # question about?"): ~50 min on 2 CPU cores (measured: 22 + 5 + 29 min)
 #   1. a pretraining-only dataset of the same 60 objects, another seed: 1,000 piled scenes (300 / 300 / 400)
 #   2. random rollouts on it (COUNTING questions, 500 + 200 per level, one each): its frames and labels

@@ -10,7 +10,7 @@
 #   4. Table III, per type, policies, Fig. 7                       -> runs/answering/report/counting-eqa
 # Each system is complete before the next starts, and every step resumes or skips what is done, so an
 # interrupted run continues where it stopped and evaluate.py reports the systems finished so far.
-# MQA_VQA=classes: ours instead of EQA's head (the grounded class pool, README "Which class is the question
+# MQA_VQA=classes: ours instead of EQA's head (the grounded class pool, docs/results.md "Which class is the question
 #   about?") on the encoder pretrained on 1,000 more scenes (checkpoints/vqa_encoder_scenes; MQA_TRAIN=1 pretrains
 #   one here on random's frames instead, tools/pretrain_encoder_scenes.sh remakes the shipped one);
 #   the report goes to runs/answering/report/counting-classes.

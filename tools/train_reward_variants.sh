@@ -3,9 +3,9 @@
 # student (tools/train_student.sh ROOT SEED) with DQN on its own reward — R_g (global), R_l (local), R_g+R_l
 # (global_local) — the demonstrations' loss beside every update, as DQfD does; then its stop is learnt
 # from its own pushes like the student's. The paper's variants trained from scratch on our CPU budget do not
-# uncover the targets (README, "Where the policy stands"); these start from a policy that does. The RL phase is
+# uncover the targets (docs/results.md, "Where the policy stands"); these start from a policy that does. The RL phase is
 # gentle (profile=cpu_dqfd_variant: lr 1e-4, demonstration weight 2.0): at the student's 5e-4 / 0.5 it undid the
-# imitation (docs/policy_attempts.md, sixteenth and seventeenth attempts).
+# imitation (docs/notebook/policy_attempts.md, sixteenth and seventeenth attempts).
 #
 #   bash tools/train_reward_variants.sh STUDENT_ROOT [OUT_ROOT] [FRAMES] [train_dqn overrides ...]
 #     STUDENT_ROOT  a tools/train_student.sh folder (its dqn/ imitation run and demos_{0,1}/)

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The learned push policy end to end on 2 CPU cores (14-15 min measured four times; docs/policy_attempts.md,
+# The learned push policy end to end on 2 CPU cores (14-15 min measured four times; docs/notebook/policy_attempts.md,
 # "Twelfth", "Thirteenth" and "Fifteenth attempt"):
 #   1. the image teacher's demonstrations on the train split, two processes at once (2 x 600 states, ~1.5 min)
 #      (MQA_TEACHER=refined: the refined teacher instead, its push the best of 9 simulated starts: 9-11.5 min,

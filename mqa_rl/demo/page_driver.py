@@ -1,4 +1,4 @@
-"""Drive the demo page in a real headless browser, as a person would (tests, README screenshot).
+"""Drive the demo page in a real headless browser, as a person would (tests, the screenshot in docs/figures).
 
 The browser is Debian's ``chromium`` with its ``chromium-driver`` (``tools/browser.sh`` installs
 them); Selenium is pointed at both and never downloads a browser or driver (offline machines).

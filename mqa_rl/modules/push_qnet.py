@@ -44,7 +44,7 @@ teacher's rule reads — the question's target map t, the cells' object presence
 the height map pooled per cell (mean, max, min) — while the stop branch keeps the whole state. The
 teacher pushes an object that stands higher than a visible target's part next to it, away from the
 target: a local function of t and height. A push branch that also sees the rgb features memorised the
-70 training scenes (docs/policy_attempts.md, seventh attempt: 47 % of pushes near the teacher's there, 5 % on new
+70 training scenes (docs/notebook/policy_attempts.md, seventh attempt: 47 % of pushes near the teacher's there, 5 % on new
 scenes); one that sees no appearance has nothing scene-specific to memorise.
 
 ``boundary_map`` (with ``geometric_push``): a sixth geometry channel, the class boundary strength
@@ -54,7 +54,8 @@ scenes); one that sees no appearance has nothing scene-specific to memorise.
 ``geometric_stop`` (with ``class_map`` and ``rotated_head``): the stop branch, too, reads only those five
 maps plus the tiled question feature (which class is asked: how large its objects are). A stop branch on
 the whole state told the teacher's stops from its pushes in 80 % of training states and 69 % of new
-ones (docs/policy_attempts.md, eighth attempt), barely above "always push" (66 %): it had memorised the scenes as well.
+ones (docs/notebook/policy_attempts.md, eighth attempt), barely above "always push" (66 %): it had
+memorised the scenes as well.
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@
 Frame fusion (``frame_fusion``): ``"attention"`` is EQA's weighted mean above; ``"max"`` (ours) takes
 each feature's maximum over the two frames instead. Objects do not vanish between the frames, so what
 either frame shows is evidence: a push that uncovers one target and buries another leaves I_stop's
-visible count where I_start's was, while the targets seen in either frame rise (README "Reading both
+visible count where I_start's was, while the targets seen in either frame rise (docs/results.md "Reading both
 frames": a perfect counter on either frame gains 0.06-0.09 over I_stop for the learned student; the
 max-fused VQA did not, at one seed). A weighted mean cannot take a maximum.
 
@@ -213,7 +213,7 @@ class VQAModel(nn.Module):
 
     def grounding_logits(self, question: torch.Tensor) -> torch.Tensor:
         """[B, heads, K]: the classes pool's choice of class per head, from tokens [B, L]. Learnt from the
-        answers alone, the choice stayed near uniform (README, "Which class is the question about?"); the
+        answers alone, the choice stayed near uniform (docs/results.md, "Which class is the question about?"); the
         grounding loss (``VQALoss(grounding=...)``) supervises it with the classes the question names."""
         if not self.grounds_classes:
             raise ValueError(f"pool={self.pool!r} picks no classes: grounding_logits needs pool='classes'")

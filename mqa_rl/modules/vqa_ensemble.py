@@ -1,8 +1,8 @@
 """Several VQAs of one system (training seeds) answering as one: the mean of their answer probabilities.
 
-Why: with ~1,200 training episodes a VQA's seed moves a Table III cell by up to 0.16 (README, "Three VQA seeds"),
-more than any difference between policies; averaging the seeds' probabilities answers with less of that noise
-and costs only the extra forward passes. ``recipes/evaluate.py 'vqa_dir=[seed0_dir, seed1_dir]'`` uses it.
+Why: with ~1,200 training episodes a VQA's seed moves a Table III cell by up to 0.16 (docs/results.md,
+"Three VQA seeds"), more than any difference between policies; averaging the seeds' probabilities answers
+with less of that noise and costs only the extra forward passes. ``recipes/evaluate.py 'vqa_dir=[seed0_dir, seed1_dir]'`` uses it.
 It honours the public contract of ``mqa_rl.modules.vqa`` (``answer_probs``, ``answers``, ``tokenize``,
 ``check_dataset``, ``meta``).
 """
