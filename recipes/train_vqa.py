@@ -39,6 +39,7 @@ from mqa_rl.data.dataset import LEVELS  # noqa: E402
 from mqa_rl.evaluation.answering_report import write_atomic  # noqa: E402
 from mqa_rl.losses.vqa import VQALoss  # noqa: E402
 from mqa_rl.modules.vqa import CHECKPOINT_NAME, VQAModel, grounding_module, save_vqa, vqa_module  # noqa: E402
+from mqa_rl.modules.perception import load_perception  # noqa: E402
 from mqa_rl.modules.vqa_encoder import load_encoder  # noqa: E402
 from mqa_rl.training.model_checkpoint import ModelCheckpoint  # noqa: E402
 from mqa_rl.training.run_logger import RunLogger, trim_scalars  # noqa: E402
@@ -69,6 +70,16 @@ def build_model(cfg: DictConfig, ds: MQADataset) -> tuple[VQAModel, dict]:
     """The VQA for ``ds``'s vocabularies with the pretrained encoder (if given) loaded; the encoder's
     architecture (channels, head width) is the file's."""
     options = {k: cfg.vqa[k] for k in MODEL_OPTIONS}
+    if cfg.vqa.pool == "counts":                      # the counting perception, frozen, in place of EQA's CNN
+        perception, perception_meta = load_perception(cfg.perception.weights)
+        if perception.num_classes != 1 + len(ds.classes):
+            raise ValueError(f"perception {cfg.perception.weights} knows {perception.num_classes - 1} classes, the dataset "
+                             f"{len(ds.classes)}: train one on frames of this object library")
+        model = VQAModel(ds.vocab.itos, ds.answers, freeze_encoder=True, encoder_classes=1 + len(ds.classes),
+                         perception=perception.config(), **options)
+        model.encoder.load_state_dict(perception.state_dict())
+        kept = {k: perception_meta.get(k) for k in ("command", "frames", "step", "val", "train_seconds")}
+        return model, {"perception": str(cfg.perception.weights), **kept}
     encoder, encoder_meta = load_encoder(cfg.encoder.weights) if cfg.encoder.weights else (None, {})
     if encoder is not None:
         options.update(encoder_channels=encoder.channels, encoder_head_width=encoder.head_width)
@@ -158,7 +169,7 @@ def train(cfg: DictConfig) -> dict:
     # ---- data: cached frozen features, or images for fine-tuning
     t0 = time.perf_counter()
     if frozen:
-        transforms = DIHEDRAL if cfg.train.augment else 1
+        transforms = DIHEDRAL if cfg.train.augment and not model.invariant_features else 1
         bar = tqdm(total=int(meta["slots"]) * 2, unit="frame", desc=f"encoding ×{transforms}", disable=not cfg.logger.progress)
         model.eval()
         records = encode_store(cfg.rollouts, lambda x: model.encode_frames(x.to(device)).cpu(), transforms=transforms,

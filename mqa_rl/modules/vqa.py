@@ -59,12 +59,14 @@ from torch import nn
 from mqa_rl import keys
 from mqa_rl.data.vocab import PAD, UNK, words
 from mqa_rl.modules.push_qnet import QuestionEncoder
+from mqa_rl.modules import vote_counting
+from mqa_rl.modules.perception import CountingPerception
 from mqa_rl.modules.vqa_encoder import FrameEncoder, standardise
 
 VQA_FORMAT = "mqa_rl.vqa"
 VQA_VERSION = 1
 CHECKPOINT_NAME = "vqa.pt"          # what recipes/train_vqa.py writes into its out_dir
-POOLS = ("eqa", "cells", "classes")
+POOLS = ("eqa", "cells", "classes", "counts")
 FUSIONS = ("attention", "max")
 TRAIN_HINT = "train one with `python recipes/train_vqa.py system=<name>` (it writes <out_dir>/vqa.pt)"
 
@@ -124,12 +126,36 @@ class QuestionClassPool(nn.Module):
         return self.out(self.norm(torch.cat([c.flatten(2).mean(-1), c.flatten(2).amax(-1), sums], -1)))
 
 
+class QuestionCountPool(nn.Module):
+    """Question-selected counts (``pool="counts"``): per-class count features [N, K, F] of the counting
+    perception (``vote_counting.count_features``; row 0 the image-wide entry, row c the class c), q [N, D]
+    → [N, D]. The question picks classes (``heads`` softmaxes over them, supervised by the grounding
+    loss); what each head picked and the image-wide entry go through one MLP."""
+
+    def __init__(self, num_classes: int, features: int, dim: int, heads: int, dropout: float):
+        super().__init__()
+        self.select = nn.Linear(dim, heads * num_classes)
+        self.heads = heads
+        self.out = nn.Sequential(nn.Linear((heads + 1) * features, dim), nn.ReLU(inplace=True), nn.Dropout(dropout))
+
+    def choice_logits(self, q: torch.Tensor) -> torch.Tensor:
+        """[N, H, K]: which class each head picks, before the softmax (what the grounding loss supervises)."""
+        return self.select(q).view(q.shape[0], self.heads, -1)
+
+    def forward(self, feats: torch.Tensor, q: torch.Tensor) -> torch.Tensor:
+        feats = feats.float()
+        choice = F.softmax(self.choice_logits(q), dim=-1)                        # [N, H, K]
+        picked = torch.einsum("nhk,nkf->nhf", choice, feats)                     # [N, H, F]
+        return self.out(torch.cat([picked.flatten(1), feats[:, 0]], -1))
+
+
 class VQAModel(nn.Module):
     """Two-frame VQA (see the module docstring). Build with ``VQAModel(vocab, answers, **config)``."""
 
     def __init__(self, vocab, answers, *, image_size: int = 224, encoder_channels=(8, 16, 32, 32), encoder_classes: int = 21,
                  encoder_head_width: int = 0, pool: str = "eqa", dim: int = 64, lstm_layers: int = 2, dropout: float = 0.5,
-                 cell_heads: int = 4, freeze_encoder: bool = True, frame_fusion: str = "attention"):
+                 cell_heads: int = 4, freeze_encoder: bool = True, frame_fusion: str = "attention",
+                 perception: dict | None = None):
         super().__init__()
         self.vocab = list(vocab)
         self.answers = list(answers)
@@ -142,15 +168,25 @@ class VQAModel(nn.Module):
         self.config = {"image_size": int(image_size), "encoder_channels": list(encoder_channels),
                        "encoder_classes": int(encoder_classes), "encoder_head_width": int(encoder_head_width), "pool": pool,
                        "dim": int(dim), "lstm_layers": int(lstm_layers), "dropout": float(dropout),
-                       "cell_heads": int(cell_heads), "freeze_encoder": bool(freeze_encoder), "frame_fusion": frame_fusion}
+                       "cell_heads": int(cell_heads), "freeze_encoder": bool(freeze_encoder), "frame_fusion": frame_fusion,
+                       "perception": dict(perception) if perception else None}
         self._stoi = {w: i for i, w in enumerate(self.vocab)}
-        self.encoder = FrameEncoder(tuple(encoder_channels), image_size, encoder_classes, encoder_head_width)
-        c, h, w = self.encoder.out_shape
+        if (pool == "counts") != bool(perception):
+            raise ValueError("pool='counts' reads the counting perception: give both (perception=<its config>, as "
+                             "recipes/train_vqa.py does with vqa=counting), or neither")
+        if pool == "counts" and not freeze_encoder:
+            raise ValueError("the counting perception's vote clusters are not differentiable: the VQA keeps it frozen "
+                             "(freeze_encoder=true); train the perception itself with recipes/train_perception.py")
+        self.encoder = CountingPerception(**perception) if perception else \
+            FrameEncoder(tuple(encoder_channels), image_size, encoder_classes, encoder_head_width)
         self.pool = pool
-        if pool == "eqa":
+        if pool == "counts":
+            self.image_fc = QuestionCountPool(self.encoder.num_classes, vote_counting.FEATURES, dim, cell_heads, dropout)
+        elif pool == "eqa":
+            c, h, w = self.encoder.out_shape
             self.image_fc = nn.Sequential(nn.Linear(c * h * w, dim), nn.ReLU(inplace=True), nn.Dropout(dropout))
         elif pool == "cells":
-            self.image_fc = QuestionCellPool(c, dim, cell_heads, dropout)
+            self.image_fc = QuestionCellPool(self.encoder.out_shape[0], dim, cell_heads, dropout)
         else:
             self.image_fc = QuestionClassPool(encoder_classes, dim, cell_heads, dropout)
         self.question = QuestionEncoder(len(self.vocab), embed=dim, hidden=dim, layers=lstm_layers, out=dim)
@@ -180,9 +216,13 @@ class VQAModel(nn.Module):
         """uint8 rgb [..., 3, H, W] → what the image part of the model reads (and a frozen encoder's cache
         holds): the bottleneck [..., 32, 10, 10], or for ``pool="classes"`` the class log-probabilities
         and object densities [..., 2K, 24, 24]."""
+        batch = rgb.shape[:-3]
+        if self.pool == "counts":
+            probs, votes = self.encoder.predict(rgb.reshape(-1, *rgb.shape[-3:]))
+            out = vote_counting.count_features(probs.float().cpu(), votes.float().cpu(), self.encoder.cell_px).to(rgb.device)
+            return out.reshape(*batch, *out.shape[1:])
         if self.pool != "classes":
             return self.encoder.encode(rgb)
-        batch = rgb.shape[:-3]
         out = self.encoder.class_maps(standardise(rgb.reshape(-1, *rgb.shape[-3:]), self.encoder.image_size))
         return out.reshape(*batch, *out.shape[1:])
 
@@ -208,15 +248,22 @@ class VQAModel(nn.Module):
 
     @property
     def grounds_classes(self) -> bool:
-        """Whether the question picks encoder classes (``pool="classes"``): then ``grounding_logits`` exists."""
-        return self.pool == "classes"
+        """Whether the question picks encoder classes (``pool="classes"`` or ``"counts"``): then
+        ``grounding_logits`` exists."""
+        return self.pool in ("classes", "counts")
+
+    @property
+    def invariant_features(self) -> bool:
+        """Whether what ``encode_frames`` gives is the same for a rotated or mirrored image (counts are):
+        then caching the 8 dihedral transforms of each frame buys nothing."""
+        return self.pool == "counts"
 
     def grounding_logits(self, question: torch.Tensor) -> torch.Tensor:
         """[B, heads, K]: the classes pool's choice of class per head, from tokens [B, L]. Learnt from the
         answers alone, the choice stayed near uniform (docs/results.md, "Which class is the question about?"); the
         grounding loss (``VQALoss(grounding=...)``) supervises it with the classes the question names."""
         if not self.grounds_classes:
-            raise ValueError(f"pool={self.pool!r} picks no classes: grounding_logits needs pool='classes'")
+            raise ValueError(f"pool={self.pool!r} picks no classes: grounding_logits needs pool='classes' or 'counts'")
         return self.image_fc.choice_logits(self.question(question))
 
     def forward(self, question: torch.Tensor, first_rgb: torch.Tensor, last_rgb: torch.Tensor):

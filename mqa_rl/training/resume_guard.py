@@ -43,14 +43,15 @@ def config_changes(old: Mapping[str, Any], new: Mapping[str, Any],
             if not is_free(k) and a.get(k, missing) != b.get(k, missing)]
 
 
-def refuse_changed_config(saved: Path, config: Mapping[str, Any], allow: bool = False) -> list[str]:
+def refuse_changed_config(saved: Path, config: Mapping[str, Any], allow: bool = False,
+                          free: Iterable[str] = RESUMABLE) -> list[str]:
     """Raise ``ValueError`` naming the changed settings when ``config`` differs from the run's ``saved``
     config.yaml (the settings of its newest checkpoint), unless ``allow`` (a deliberate new phase: say so
-    with ``resume_allow_changes=true``). Returns the changes (printed when allowed); a run without a
+    with ``resume_allow_changes=true``); ``free``: the settings a resume may change. Returns the changes (printed when allowed); a run without a
     saved config (older than it) is not checked."""
     if not saved.exists():
         return []
-    changes = config_changes(OmegaConf.to_container(OmegaConf.load(saved), resolve=True), config)
+    changes = config_changes(OmegaConf.to_container(OmegaConf.load(saved), resolve=True), config, free)
     if changes and not allow:
         raise ValueError(f"resume=true with settings that differ from the run in {saved.parent}:\n  "
                          + "\n  ".join(changes)

@@ -1,0 +1,112 @@
+"""Does the counting perception count the asked class? On every COUNTING question of a split, its count
+of the question's class on the scene's first image (rendered here) against the targets with ≥ 20
+visible pixels (the perfect counter's rule) and against the answer, per level, with 95 % intervals
+that resample whole scenes; and by the smallest countable target's visible area.
+
+    python benchmarks/perception_counts.py --perception checkpoints/vqa_counting/perception.pt
+    python benchmarks/perception_counts.py --perception ... --dataset data/mqa_heldout     # fresh piles
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+import torch
+
+import mqa_rl  # noqa: F401  (sets OMP_WAIT_POLICY before torch's threads start)
+from mqa_rl import keys
+from mqa_rl.data import MQADataset
+from mqa_rl.data.dataset import LEVELS
+from mqa_rl.envs.sapien_bin import SapienBinEnv
+from mqa_rl.evaluation.answering_report import write_atomic
+from mqa_rl.evaluation.episode_metrics import scene_bootstrap_ci95
+from mqa_rl.modules import vote_counting
+from mqa_rl.modules.perception import load_perception
+from mqa_rl.transforms.episode_stats import COUNTABLE_PX
+
+AREA_BINS = ((20, 100), (100, 500), (500, float("inf")))
+
+
+def first_images(ds: MQADataset, split: str):
+    """{scene index: (rgb uint8 [3, H, W], visible px [n], class per object [n])} of the split's rest piles."""
+    env = SapienBinEnv(ds, split=None)
+    out = {}
+    for i, scene in enumerate(ds.scenes):
+        if scene.split != split:
+            continue
+        question = next(q for q in ds.questions if q.scene_id == scene.id)
+        td = env.reset(question_id=question.id)
+        n = len(scene.objects)
+        out[i] = (td[keys.RGB], td[keys.VISIBLE_AREA][:n].clone(),
+                  torch.tensor([1 + ds.classes.index(o.class_name) for o in scene.objects]))
+    env.close()
+    return out
+
+
+@torch.no_grad()
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--perception", required=True)
+    p.add_argument("--dataset", default="data/mqa")
+    p.add_argument("--split", default="test")
+    p.add_argument("--json", default=None, help="also write the figures to this file")
+    a = p.parse_args()
+    torch.set_num_threads(2)
+    ds = MQADataset(a.dataset)
+    model, meta = load_perception(a.perception)
+    t0 = time.perf_counter()
+    scenes = first_images(ds, a.split)
+    render_s = time.perf_counter() - t0
+    order = sorted(scenes)
+    t0 = time.perf_counter()
+    counted = {}
+    for start in range(0, len(order), 32):
+        ids = order[start:start + 32]
+        probs, votes = model.predict(torch.stack([scenes[i][0] for i in ids]))
+        for i, row in zip(ids, vote_counting.counts(probs, votes, model.cell_px)):
+            counted[i] = row
+    perceive_s = time.perf_counter() - t0
+    index = {s.id: i for i, s in enumerate(ds.scenes)}
+    rows = []                  # (level, scene, predicted, visible, answer, smallest countable target's area)
+    for q in ds.select(split=a.split, types=["counting"]):
+        i = index[q.scene_id]
+        _, visible, classes = scenes[i]
+        c = 1 + ds.classes.index(q.classes[0])
+        areas = visible[(classes == c) & (visible >= COUNTABLE_PX)]
+        rows.append((LEVELS.index(ds.scenes[i].difficulty), i, int(counted[i][c - 1]), len(areas), int(q.answer),
+                     float(areas.min()) if len(areas) else float("nan")))
+    t = torch.tensor(rows, dtype=torch.float64)
+    report = {"perception": a.perception, "dataset": a.dataset, "split": a.split, "step": meta.get("step"),
+              "render_s": round(render_s, 1), "perceive_ms_per_image": round(1000 * perceive_s / len(order), 1), "levels": {}}
+    print(f"{a.perception} (step {meta.get('step')}) on {a.dataset} {a.split}: {len(order)} first images "
+          f"({report['perceive_ms_per_image']} ms each), {len(rows)} COUNTING questions")
+    for lv, level in enumerate(LEVELS):
+        m = t[:, 0] == lv
+        if not m.any():
+            continue
+        right = (t[m, 2] == t[m, 3]).double()
+        mean, lo, hi, n_scenes = scene_bootstrap_ci95(right, t[m, 1].long())
+        answer = float((t[m, 2] == t[m, 4]).double().mean())
+        perfect = float((t[m, 3] == t[m, 4]).double().mean())
+        report["levels"][level] = {"count_equals_visible": mean, "low": lo, "high": hi, "questions": int(m.sum()),
+                                   "scenes": n_scenes, "count_equals_answer": answer, "perfect_counter_equals_answer": perfect}
+        print(f"  {level:6s} {int(m.sum()):4d} questions, {n_scenes:3d} scenes: count = visible {mean:.3f} "
+              f"[{lo:.3f}, {hi:.3f}]  = answer {answer:.3f}  (perfect counter = answer {perfect:.3f})")
+    bins = {}
+    for low, high in AREA_BINS:
+        m = (t[:, 5] >= low) & (t[:, 5] < high)
+        if m.any():
+            bins[f"{low}-{high}"] = {"count_equals_visible": float((t[m, 2] == t[m, 3]).double().mean()), "questions": int(m.sum())}
+    m = t[:, 3] == 0
+    bins["no countable target"] = {"count_equals_visible": float((t[m, 2] == 0).double().mean()), "questions": int(m.sum())}
+    report["by_smallest_visible_px"] = bins
+    print("  by the smallest countable target's visible px: " + ", ".join(
+        f"{k}: {v['count_equals_visible']:.3f} (n={v['questions']})" for k, v in bins.items()))
+    if a.json:
+        write_atomic(a.json, json.dumps(report, indent=1))
+
+
+if __name__ == "__main__":
+    main()

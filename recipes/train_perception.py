@@ -1,0 +1,227 @@
+"""Train the VQA's counting perception on labelled frames of fresh piles (recipes/collect_frames.py).
+
+    python recipes/collect_frames.py                                  # the frames (pretraining-only dataset)
+    python recipes/train_perception.py                                # ~90 min on 2 CPU cores
+    python recipes/train_perception.py resume=true                    # continue a killed run
+    python recipes/train_perception.py device=cuda train.batch_size=128 model.widths=[48,64,128,192]
+
+Selects by the counting rule itself, on whole held-out pretraining scenes: the share of (frame, class
+in the scene) pairs whose vote-cluster count equals the number of objects with ≥ 20 visible pixels.
+Writes ``out_dir/perception.pt`` (the best; ``mqa_rl.modules.perception.load_perception``),
+``checkpoints/`` (atomic, for resume=true), ``csv/`` + ``wandb/`` logs, ``config.yaml``, ``summary.json``.
+"""
+
+from __future__ import annotations
+
+import mqa_rl  # noqa: F401  (first: sets OMP_WAIT_POLICY before torch loads)
+import json
+import math
+import time
+from pathlib import Path
+
+import hydra
+import numpy as np
+import torch
+from omegaconf import DictConfig, OmegaConf
+from tensordict import TensorDict
+from tqdm import tqdm
+
+from mqa_rl import keys
+from mqa_rl.collectors.perception_frames import load_frames
+from mqa_rl.collectors.store import read_meta
+from mqa_rl.evaluation.answering_report import write_atomic
+from mqa_rl.losses.perception import PerceptionLoss
+from mqa_rl.modules import vote_counting
+from mqa_rl.modules.perception import CountingPerception, save_perception
+from mqa_rl.modules.vqa_encoder import standardise
+from mqa_rl.training.model_checkpoint import ModelCheckpoint
+from mqa_rl.training.resume_guard import RESUMABLE, refuse_changed_config
+from mqa_rl.training.run_logger import RunLogger, trim_scalars
+from mqa_rl.training.signals import exit_on_sigterm
+from mqa_rl.training.vqa_data import DIHEDRAL, dihedral, scene_split
+from mqa_rl.transforms.episode_stats import COUNTABLE_PX
+
+PERCEPTION_FILE = "perception.pt"
+COMMAND = "python recipes/train_perception.py"
+
+
+def check_config(cfg: DictConfig) -> None:
+    t = cfg.train
+    if min(t.steps, t.batch_size, t.eval_interval, cfg.checkpoint.interval_steps) <= 0:
+        raise ValueError("train.steps, train.batch_size, train.eval_interval and checkpoint.interval_steps must be positive")
+    if not 0.0 < t.val_fraction < 1.0:
+        raise ValueError(f"train.val_fraction={t.val_fraction} must lie in (0, 1): the checkpoint is chosen on held-out scenes")
+    if t.lr <= 0 or t.warmup_steps < 0:
+        raise ValueError(f"train.lr ({t.lr}) must be > 0 and train.warmup_steps ({t.warmup_steps}) ≥ 0")
+    for store in cfg.frames.stores:
+        read_meta(store)                     # FileNotFoundError naming the recipe that collects it
+
+
+def true_counts(frames, num_classes: int) -> torch.Tensor:
+    """int64 [N, K-1]: objects of each class with ≥ COUNTABLE_PX visible pixels (the perfect counter)."""
+    countable = frames.get(keys.FRAME_VISIBLE) >= COUNTABLE_PX
+    classes = frames.get(keys.OBJECT_CLASSES)
+    onehot = torch.nn.functional.one_hot(classes, num_classes)[..., 1:]              # [N, 50, K-1]
+    return (onehot * countable[..., None]).sum(1)
+
+
+@torch.no_grad()
+def count_accuracy(model: CountingPerception, frames, device, batch_size: int = 64) -> dict[str, float]:
+    """Share of (frame, class present in its scene) pairs counted right, overall and by level."""
+    model.eval()
+    k = model.num_classes
+    truth = true_counts(frames, k)
+    present = torch.nn.functional.one_hot(frames.get(keys.OBJECT_CLASSES), k)[..., 1:].amax(1).bool()
+    preds = []
+    for start in range(0, frames.shape[0], batch_size):
+        probs, votes = model.predict(frames.get(keys.RGB)[start:start + batch_size].to(device))
+        preds.append(vote_counting.counts(probs.float().cpu(), votes.float().cpu(), model.cell_px))
+    model.train()
+    right = (torch.cat(preds) == truth) & present
+    levels = frames.get(keys.LEVEL)
+    out = {"val/count_accuracy": (right.sum() / present.sum()).item()}
+    for i, name in enumerate(("easy", "medium", "hard")):
+        m = levels == i
+        if m.any():
+            out[f"val/count_accuracy_{name}"] = (right[m].sum() / present[m].sum()).item()
+    return out
+
+
+def augment(rgb: torch.Tensor, omap: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """The same random dihedral transform of a frame's rgb and object map (the bin seen from above is symmetric)."""
+    k = torch.randint(DIHEDRAL, (rgb.shape[0],))
+    rgb, omap = rgb.clone(), omap.clone()
+    for t in k.unique().tolist():
+        rgb[k == t] = dihedral(rgb[k == t], t)
+        omap[k == t] = dihedral(omap[k == t], t)
+    return rgb, omap
+
+
+def train(cfg: DictConfig) -> dict:
+    check_config(cfg)
+    out = Path(cfg.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    torch.manual_seed(cfg.seed)
+    if cfg.threads:
+        torch.set_num_threads(cfg.threads)
+    device = torch.device(cfg.device)
+    config = OmegaConf.to_container(cfg, resolve=True)
+
+    frames = load_frames(list(cfg.frames.stores))
+    metas = [read_meta(s) for s in cfg.frames.stores]
+    sizes = {m["plan"]["size"] for m in metas}
+    if sizes != {int(cfg.model.image_size)}:
+        raise ValueError(f"the frames were rendered at {sorted(sizes)} px, model.image_size={cfg.model.image_size}: "
+                         f"collect frames at that size (collect_frames.py size=...) or set model.image_size")
+    classes = frames.get(keys.OBJECT_CLASSES)
+    num_classes = int(cfg.model.num_classes)
+    if int(classes.max()) >= num_classes:
+        raise ValueError(f"frames hold class {int(classes.max())} but model.num_classes={num_classes}")
+    val_mask = scene_split(frames, cfg.train.val_fraction, cfg.seed)
+    val = frames[val_mask]
+    if val.shape[0] == 0:
+        raise ValueError(f"train.val_fraction={cfg.train.val_fraction} holds out no scene of the "
+                         f"{len(frames.get(keys.SCENE).unique())} in the frames: raise it or collect frames of more scenes")
+    if cfg.train.max_val_frames and val.shape[0] > cfg.train.max_val_frames:
+        keep = torch.from_numpy(np.random.default_rng(cfg.seed).choice(val.shape[0], cfg.train.max_val_frames, replace=False))
+        val = val[keep.sort().values]
+    train_set = frames[~val_mask]
+    n_train = train_set.shape[0]
+    if cfg.train.max_frames and n_train > cfg.train.max_frames:       # the data-size ablation (6k / 20k / 50k)
+        keep = torch.from_numpy(np.random.default_rng(cfg.seed).choice(n_train, cfg.train.max_frames, replace=False))
+        train_set = train_set[keep.sort().values]
+        n_train = train_set.shape[0]
+    rgb_all, omap_all, cls_all = train_set.get(keys.RGB), train_set.get(keys.OBJECT_MAP), train_set.get(keys.OBJECT_CLASSES)
+    print(f"{n_train} training frames, {val.shape[0]} validation frames ({int(val_mask.sum())} held out) "
+          f"from {len(cfg.frames.stores)} store(s)", flush=True)
+
+    model = CountingPerception(num_classes, tuple(cfg.model.widths), int(cfg.model.image_size)).to(device)
+    loss = PerceptionLoss(model, vote_weight=cfg.train.vote_weight)
+    optim = torch.optim.AdamW(model.parameters(), lr=cfg.train.lr, weight_decay=cfg.train.weight_decay)
+    steps = int(cfg.train.steps)
+    warm = int(cfg.train.warmup_steps)
+    schedule = torch.optim.lr_scheduler.LambdaLR(
+        optim, lambda s: min(1.0, (s + 1) / max(warm, 1)) * 0.5 * (1 + math.cos(math.pi * min(s, steps) / steps)))
+    state = {"step": 0, "best": -math.inf, "best_step": -1, "train_seconds": 0.0}
+    ckpt = ModelCheckpoint(out / "checkpoints", model=model, optimizer=optim, state=state, keep_last=cfg.checkpoint.keep_last)
+    if ckpt.latest() is not None:
+        if not cfg.resume:
+            raise FileExistsError(f"{out} already holds checkpoints ({ckpt.latest().name}): pass resume=true to continue "
+                                  f"that run, or choose another out_dir")
+        refuse_changed_config(out / "config.yaml", config, allow=bool(cfg.resume_allow_changes),
+                              free=(*RESUMABLE, "train.steps"))      # a longer run stretches the cosine from here
+        ckpt.load()
+        schedule.last_epoch = state["step"]
+        schedule.step()
+        schedule.last_epoch = state["step"]
+        for group, lr in zip(optim.param_groups, schedule.get_last_lr()):
+            group["lr"] = lr
+        print(f"resumed at step {state['step']} ({trim_scalars(out / 'csv', state['step'])} log rows after it dropped)")
+    elif (out / "config.yaml").exists() or (out / "csv").exists():
+        raise FileExistsError(f"{out} holds the logs of a run with no checkpoint (killed before its first one): "
+                              f"remove {out} or choose another out_dir")
+    if state["step"] >= steps and (out / PERCEPTION_FILE).exists():
+        print(f"{out} has finished its {state['step']} steps already (raise train.steps to train on)")
+        return json.loads((out / "summary.json").read_text()) if (out / "summary.json").exists() else dict(state)
+    write_atomic(out / "config.yaml", OmegaConf.to_yaml(OmegaConf.create(config)))
+    logger = RunLogger(out, wandb=cfg.logger.wandb, project=cfg.logger.project, exp_name="perception", config=config)
+    meta = {"command": COMMAND, "frames": [{"store": str(s), "dataset_sha256": m["dataset"]["manifest_sha256"],
+                                            "plan": m["plan"]} for s, m in zip(cfg.frames.stores, metas)],
+            "train_frames": n_train, "val_frames": int(val.shape[0]), "config": config}
+
+    bar = tqdm(total=steps, initial=state["step"], unit="step", dynamic_ncols=True, disable=not cfg.logger.progress)
+    window: dict[str, list[float]] = {}
+    t_window = time.perf_counter()
+    try:
+        while state["step"] < steps:
+            t0 = time.perf_counter()
+            idx = torch.randint(n_train, (cfg.train.batch_size,))
+            rgb, omap = rgb_all[idx], omap_all[idx]
+            if cfg.train.augment:
+                rgb, omap = augment(rgb, omap)
+            batch = {keys.OBJECT_MAP: omap.to(device), keys.OBJECT_CLASSES: cls_all[idx].to(device)}
+            td = loss(TensorDict(batch, batch_size=[len(idx)]), standardise(rgb.to(device), model.image_size))
+            optim.zero_grad()
+            (td["loss_class"] + td["loss_votes"]).backward()
+            torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.train.max_grad_norm)
+            optim.step()
+            schedule.step()
+            state["step"] += 1
+            state["train_seconds"] += time.perf_counter() - t0
+            for k, v in td.items():
+                window.setdefault(k, []).append(float(v.detach()))
+            bar.update(1)
+            step = state["step"]
+            if step % cfg.train.eval_interval == 0 or step == steps:
+                metrics = {f"train/{k}": float(np.mean(v)) for k, v in window.items()}
+                metrics["time/steps_per_s"] = len(window["loss_class"]) / max(time.perf_counter() - t_window, 1e-9)
+                metrics["train/lr"] = optim.param_groups[0]["lr"]
+                metrics.update(count_accuracy(model, val, device))
+                window, t_window = {}, time.perf_counter()
+                if metrics["val/count_accuracy"] > state["best"]:
+                    state["best"], state["best_step"] = metrics["val/count_accuracy"], step
+                    save_perception(model, out / PERCEPTION_FILE,
+                                    {**meta, "step": step, "val": metrics, "train_seconds": round(state["train_seconds"], 1)})
+                logger.log_metrics(metrics, step=step)
+                bar.set_postfix(loss=f"{metrics['train/loss_class']:.3f}", count=f"{metrics['val/count_accuracy']:.3f}")
+            if step % cfg.checkpoint.interval_steps == 0 or step == steps:
+                ckpt.save(step)
+    finally:
+        bar.close()
+        logger.close()
+    summary = {"steps": steps, "best_step": state["best_step"], "best_val_count_accuracy": state["best"],
+               "train_seconds": round(state["train_seconds"], 1), "train_frames": n_train, "val_frames": int(val.shape[0]),
+               "perception": str(out / PERCEPTION_FILE)}
+    write_atomic(out / "summary.json", json.dumps(summary, indent=1))
+    print("done:", summary)
+    return summary
+
+
+@hydra.main(config_path="conf", config_name="train_perception", version_base="1.3")
+def main(cfg: DictConfig) -> None:
+    exit_on_sigterm()
+    train(cfg)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,177 @@
+"""The counting perception: its targets, the vote counting, its file, and the VQA that reads it."""
+
+from types import SimpleNamespace
+
+import pytest
+import torch
+
+from mqa_rl import keys
+from mqa_rl.collectors.perception_frames import check_disjoint, scene_fingerprint
+from mqa_rl.losses.perception import PerceptionLoss, perception_targets
+from mqa_rl.modules import vote_counting
+from mqa_rl.modules.perception import CountingPerception, load_perception, save_perception
+from mqa_rl.modules.vqa import VQAModel, load_vqa, save_vqa
+from mqa_rl.transforms.episode_stats import COUNTABLE_PX
+
+K = 8          # classes incl. background in these synthetic frames
+
+
+def synthetic_frame():
+    """A 112-px object map where class 3 has two touching objects (one blob of a class mask) and a tiny
+    one below the counting line, class 5 one object cut in two by an occluder of class 7."""
+    omap = torch.zeros(112, 112, dtype=torch.uint8)
+    omap[10:40, 10:30] = 1          # class 3
+    omap[10:40, 30:50] = 2          # class 3, touching slot 1
+    omap[60:70, 10:70] = 3          # class 5 ...
+    omap[55:75, 35:45] = 4          # ... cut in two by class 7
+    omap[100:102, 100:102] = 5      # class 3, 4 px at 112 = 16 px of the 224-px render: not countable
+    classes = torch.zeros(50, dtype=torch.int64)
+    classes[:5] = torch.tensor([3, 3, 5, 7, 3])
+    visible = torch.zeros(50)
+    visible[:5] = torch.stack([(omap == i + 1).sum() * 4.0 for i in range(5)])
+    return omap, classes, visible
+
+
+def test_perfect_class_fractions_and_votes_count_instances_not_blobs():
+    omap, classes, visible = synthetic_frame()
+    frac, offsets, _ = perception_targets(omap[None], classes[None], K, 56)
+    assert torch.allclose(frac.sum(1), torch.ones(1, 56, 56))
+    # the class fractions hold each class's visible area: 16 px of the render per output cell
+    area3 = frac[0, 3].sum() * 16
+    assert area3 == pytest.approx(float(visible[[0, 1, 4]].sum()), rel=1e-5)
+    counted = vote_counting.counts(frac, offsets, 16.0)[0]
+    truth = {c: int(((classes == c) & (visible >= COUNTABLE_PX)).sum()) for c in range(1, K)}
+    assert counted.tolist() == [truth[c] for c in range(1, K)]
+    assert counted[2].item() == 2 and counted[4].item() == 1          # classes 3 and 5
+
+
+def test_count_features_put_the_image_row_first_and_one_hot_the_count():
+    omap, classes, _ = synthetic_frame()
+    frac, offsets, _ = perception_targets(omap[None], classes[None], K, 56)
+    feats = vote_counting.count_features(frac, offsets, 16.0)
+    assert feats.shape == (1, K, vote_counting.FEATURES)
+    assert feats[0, 3, 2] == 1.0 and feats[0, 3, :vote_counting.MAX_COUNT + 1].sum() == 1.0
+    assert feats[0, 0, 0] == pytest.approx(4 / 50)                   # 2 + 1 + 1 countable objects
+    assert feats[0, 1, 0] == 1.0                                     # an absent class counts 0
+
+
+def test_perception_learns_a_few_frames():
+    torch.manual_seed(0)
+    omap, classes, _ = synthetic_frame()
+    model = CountingPerception(K, widths=(8, 8, 16, 16))
+    loss = PerceptionLoss(model)
+    rgb = torch.zeros(2, 3, 112, 112)
+    rgb[:, 0] = omap.float() / 5.0 - 0.5          # each object its own shade of red
+    rgb[:, 1] = (torch.tensor([0, 3, 3, 5, 7, 3])[omap.long()].float() / 7.0) - 0.5
+    batch = __import__("tensordict").TensorDict({keys.OBJECT_MAP: omap.expand(2, -1, -1),
+                                                 keys.OBJECT_CLASSES: classes.expand(2, -1)}, batch_size=[2])
+    optim = torch.optim.Adam(model.parameters(), lr=3e-3)
+    first = None
+    for _ in range(60):
+        td = loss(batch, rgb)
+        total = td["loss_class"] + td["loss_votes"]
+        first = float(total) if first is None else first
+        optim.zero_grad()
+        total.backward()
+        optim.step()
+    assert float(total.detach()) < 0.4 * first
+
+
+def test_perception_file_round_trip_and_refusals(tmp_path):
+    model = CountingPerception(K, widths=(8, 8, 16, 16))
+    path = save_perception(model, tmp_path / "perception.pt", {"command": "test"})
+    loaded, meta = load_perception(path)
+    x = torch.randint(0, 255, (1, 3, 224, 224), dtype=torch.uint8)
+    assert torch.equal(loaded.predict(x)[0], model.eval().predict(x)[0]) and meta["command"] == "test"
+    with pytest.raises(FileNotFoundError, match="train_perception.py"):
+        load_perception(tmp_path / "missing.pt")
+    (tmp_path / "junk.pt").write_bytes(b"not a checkpoint")
+    with pytest.raises(ValueError, match="cannot be read"):
+        load_perception(tmp_path / "junk.pt")
+    torch.save({"format": "something else"}, tmp_path / "foreign.pt")
+    with pytest.raises(ValueError, match="not a perception file"):
+        load_perception(tmp_path / "foreign.pt")
+
+
+def test_counting_vqa_answers_through_the_public_contract_and_reloads(tmp_path):
+    perception = CountingPerception(K, widths=(8, 8, 16, 16))
+    vocab = ["<pad>", "<unk>", "how", "many", "cans", "are", "there", "in", "the", "bin", "?"]
+    model = VQAModel(vocab, ["0", "1", "2", "3"], pool="counts", cell_heads=2, perception=perception.config())
+    model.encoder.load_state_dict(perception.state_dict())
+    tokens = model.tokenize(["How many cans are there in the bin?"])
+    img = torch.randint(0, 255, (1, 224, 224, 3), dtype=torch.uint8)
+    probs = model.answer_probs(tokens, img, img)
+    assert probs.shape == (1, 4) and torch.allclose(probs.sum(-1), torch.ones(1))
+    assert model.grounding_logits(tokens).shape == (1, 2, K)
+    again = load_vqa(save_vqa(model, tmp_path / "vqa.pt"))
+    assert torch.allclose(again.answer_probs(tokens, img, img), probs)
+    with pytest.raises(ValueError, match="not differentiable"):
+        VQAModel(vocab, ["0"], pool="counts", perception=perception.config(), freeze_encoder=False)
+    with pytest.raises(ValueError, match="counting perception"):
+        VQAModel(vocab, ["0"], pool="counts")
+
+
+def _dataset(root, scenes):
+    return SimpleNamespace(root=root, scenes=[SimpleNamespace(id=i, split=s, objects=objs) for i, s, objs in scenes])
+
+
+def test_a_pretraining_set_sharing_a_scene_with_the_test_split_is_refused():
+    obj = lambda name, x: SimpleNamespace(name=name, pose=(x, 0.0, 0.1, 1.0, 0.0, 0.0, 0.0))   # noqa: E731
+    test_pile = [obj("can_0", 0.01), obj("apple_1", 0.05)]
+    evaluation = _dataset("data/mqa", [("scene_000", "train", [obj("can_0", 0.02)]), ("scene_001", "test", test_pile)])
+    fresh = _dataset("data/frames", [("scene_000", "train", [obj("can_0", 0.03)])])
+    check_disjoint(fresh, [(evaluation, "test")])
+    shared = _dataset("data/frames", [("scene_007", "train", list(reversed(test_pile)))])
+    assert scene_fingerprint(shared.scenes[0]) == scene_fingerprint(evaluation.scenes[1])
+    with pytest.raises(ValueError, match="scene_001"):
+        check_disjoint(shared, [(evaluation, "test")])
+    check_disjoint(_dataset("data/frames", [("s", "train", [obj("can_0", 0.02)])]), [(evaluation, "test")])
+
+
+def test_frames_perception_and_counting_vqa_recipes_end_to_end(small_dataset, sparse_dataset, answering_root, tmp_path):
+    """collect_frames (resumable, refuses the test split's piles) → train_perception (resumes, refuses
+    changed settings) → train_vqa vqa=counting → load_vqa answers."""
+    from conftest import compose_recipe_config, load_recipe
+
+    root, overrides = answering_root
+    quiet = ["logger.wandb=false", "logger.progress=false"]
+    frames = tmp_path / "frames"
+    collect = load_recipe("collect_frames")
+    args = [f"dataset={small_dataset.root}", f"out_dir={frames}", "episodes_per_scene=1", "pushes=1", "workers=1",
+            "chunk_episodes=2", f"protected=[{{dataset: {sparse_dataset.root}, split: null}}]"]
+    collect.main.__wrapped__(compose_recipe_config("collect_frames", args))
+    records = __import__("mqa_rl.collectors.store", fromlist=["load_records"]).load_records(frames)
+    n = len(small_dataset.scenes)
+    assert records.shape[0] == 2 * n and records.get(keys.RGB).shape[-1] == 112
+    assert records.get(keys.PUSHES).tolist() == [0, 1] * n
+    sizes = torch.tensor([len(small_dataset.scenes[int(i)].objects) for i in records.get(keys.SCENE)])
+    assert ((records.get(keys.OBJECT_CLASSES) > 0).sum(-1) == sizes).all()
+    assert ((records.get(keys.FRAME_VISIBLE) > 0).sum(-1) <= sizes).all()
+    with pytest.raises(ValueError, match="same pile"):
+        collect.main.__wrapped__(compose_recipe_config("collect_frames", [
+            f"dataset={small_dataset.root}", f"out_dir={tmp_path / 'leak'}", "workers=1",
+            f"protected=[{{dataset: {small_dataset.root}, split: test}}]"]))
+    assert not (tmp_path / "leak").exists()
+
+    train = load_recipe("train_perception")
+    out = tmp_path / "perception"
+    targs = [*quiet, f"frames.stores=[{frames}]", f"out_dir={out}", "model.widths=[8,8,16,16]", "train.batch_size=2",
+             "train.eval_interval=2", "checkpoint.interval_steps=2", "train.val_fraction=0.4", "train.warmup_steps=1"]
+    first = train.train(compose_recipe_config("train_perception", [*targs, "train.steps=2"]))
+    assert first["steps"] == 2 and (out / "perception.pt").exists()
+    with pytest.raises(FileExistsError, match="resume=true"):
+        train.train(compose_recipe_config("train_perception", [*targs, "train.steps=2"]))
+    with pytest.raises(ValueError, match="train.lr"):
+        train.train(compose_recipe_config("train_perception", [*targs, "train.steps=4", "resume=true", "train.lr=0.5"]))
+    again = train.train(compose_recipe_config("train_perception", [*targs, "train.steps=4", "resume=true"]))
+    assert again["steps"] == 4
+
+    train_vqa = load_recipe("train_vqa")
+    vargs = [*overrides, *quiet, "system=random", "vqa=counting", f"perception.weights={out / 'perception.pt'}",
+             "train.batch_size=4", "train.eval_interval=2", "train.steps=4", "checkpoint.interval_steps=2"]
+    summary = train_vqa.train(compose_recipe_config("train_vqa", vargs))
+    model = load_vqa(summary["vqa"])
+    assert model.pool == "counts" and model.meta["encoder"]["perception"].endswith("perception.pt")
+    q = small_dataset.questions[0]
+    img = torch.zeros(1, 224, 224, 3, dtype=torch.uint8)
+    assert model.answer_probs(model.tokenize([q.text]), img, img).shape == (1, len(small_dataset.answers))
