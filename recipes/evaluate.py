@@ -51,7 +51,8 @@ from mqa_rl.training.vqa_data import IMAGE_KEYS, RECORD_KEYS  # noqa: E402
 EVAL_KEYS = (*RECORD_KEYS, *IMAGE_KEYS, keys.EPISODE_TARGETS, (keys.FIRST, keys.FRAME_VISIBLE),
              (keys.LAST, keys.FRAME_VISIBLE))
 # what the calibrated counter reads from the training rollouts
-COUNT_KEYS = (keys.TYPE_LABEL, keys.LEVEL, keys.ANSWER_LABEL, keys.EPISODE_TARGETS, (keys.LAST, keys.FRAME_VISIBLE))
+COUNT_KEYS = (keys.TYPE_LABEL, keys.LEVEL, keys.ANSWER_LABEL, keys.EPISODE_TARGETS, (keys.FIRST, keys.FRAME_VISIBLE),
+              (keys.LAST, keys.FRAME_VISIBLE))
 
 
 def vqa_dirs(cfg: DictConfig) -> list[str]:
@@ -134,13 +135,16 @@ def evaluate_system(cfg: DictConfig, ds: MQADataset, name: str, plan_sha: str) -
 
 
 def calibrated_counter(train_store: Path, test: TensorDict) -> dict:
-    """{"counter_calibrated": accuracy table} of the perfect count on I_stop mapped to answers as in the
-    system's training rollouts (``ans.calibrated_counter_right``); {} when those are gone."""
+    """{"counter_calibrated": ..., "counter_calibrated_either": ...} accuracy tables of the perfect count on
+    I_stop, and on either frame, mapped to answers as in the system's training rollouts
+    (``ans.calibrated_counter_right``): the ceilings of a VQA that reads the count on I_stop, or on both
+    frames; {} when those rollouts are gone."""
     try:
         train = load_records(train_store, COUNT_KEYS)
     except (FileNotFoundError, StoreError):
         return {}
-    return {"counter_calibrated": ans.accuracy_table(ans.calibrated_counter_right(train, test, keys.LAST), test)}
+    return {"counter_calibrated": ans.accuracy_table(ans.calibrated_counter_right(train, test, keys.LAST), test),
+            "counter_calibrated_either": ans.accuracy_table(ans.calibrated_counter_right(train, test, ans.EITHER), test)}
 
 
 def evaluate(cfg: DictConfig) -> dict:

@@ -120,6 +120,8 @@ def test_evaluate_writes_table3_and_names_what_is_missing(small_dataset, trained
     assert (out / "table3.png").stat().st_size > 0 and "counting" in (out / "per_type.md").read_text()
     assert "perfect counter" in (out / "policy.md").read_text() and "calibrated on I_stop" in (out / "policy.md").read_text()
     assert set(sys_res["random"]["counter_calibrated"]["counting"]) == {"easy", "hard", "all"}
+    either, last = sys_res["random"]["counter_calibrated_either"]["counting"], sys_res["random"]["counter_calibrated"]["counting"]
+    assert set(either) == set(last) and "calibrated on either" in (out / "policy.md").read_text()
     assert "on either" in (out / "policy.md").read_text() and "counter_either" in rows[0]
     assert json.loads((out / "results.json").read_text())["systems"]["random"]["episodes"] == 4
 

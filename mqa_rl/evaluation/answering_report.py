@@ -4,7 +4,7 @@ CSV and a bar chart. Every file is written atomically.
 
 ``results["systems"][name]`` is either ``{"status": "missing", "reason": ..., "command": ...}`` or
 ``{"status": "ok", "accuracy": {type: {level: {accuracy, low, high, n}}}, "vs_random": {level: [mean,
-half, n]}, "vs_prior": the same against the answer prior, "counter_first" / "counter_last" / "counter_either" / "counter_calibrated" (absent when the training rollouts are gone): like accuracy, "policy": {level: {metric: [mean, half, n]}}}``;
+half, n]}, "vs_prior": the same against the answer prior, "counter_first" / "counter_last" / "counter_either" / "counter_calibrated" / "counter_calibrated_either" (the last two absent when the training rollouts are gone): like accuracy, "policy": {level: {metric: [mean, half, n]}}}``;
 ``results["references"]`` maps a reference's name (the answer prior) to an accuracy table.
 """
 
@@ -20,7 +20,7 @@ from mqa_rl.data.dataset import LEVELS
 from mqa_rl.evaluation.paper import PAPER_BEST, PAPER_NAMES, TABLE_III, VARIANT_FAMILIES
 
 # the perfect counters of a system's results, in the order policy.md and table3.csv show them
-COUNTERS = ("counter_first", "counter_last", "counter_either", "counter_calibrated")
+COUNTERS = ("counter_first", "counter_last", "counter_either", "counter_calibrated", "counter_calibrated_either")
 CSV_HEADER = ["system", "status", "type", "level", "accuracy", "low", "high", "n", "paper", "vs_random", "vs_random_ci95",
               "vs_prior", "vs_prior_ci95", "pushes", "chi_end", "chi_change", *COUNTERS]
 
@@ -119,7 +119,7 @@ def per_type_markdown(results: dict) -> str:
 def policy_markdown(results: dict) -> str:
     cols = ("pushes", "stopped", "chi_end", "chi_change")
     lines = ["| system | level | pushes | stopped | targets' χ at the end | χ end − start | perfect counter (≥ 20 px) "
-             "on I_start | on I_stop | on either | calibrated on I_stop |", "|---|---|" + "---|" * 8]
+             "on I_start | on I_stop | on either | calibrated on I_stop | calibrated on either |", "|---|---|" + "---|" * 9]
     for name, res in results["systems"].items():
         if res["status"] != "ok":
             continue

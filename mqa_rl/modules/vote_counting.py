@@ -70,12 +70,20 @@ def counts(probs: torch.Tensor, votes: torch.Tensor, cell_px: float, min_px: flo
 
 def count_features(probs: torch.Tensor, votes: torch.Tensor, cell_px: float, min_px: float = COUNTABLE_PX,
                    **kwargs) -> torch.Tensor:
-    """float [B, K, FEATURES]: row c ≥ 1 the class c (count one-hot, top masses, area), aligned with the
-    class channels; row 0 the image-wide entry: the number of counted objects of every class (/ 50, first entry)."""
-    b, k = probs.shape[:2]
-    feats = torch.zeros(b, k, FEATURES, dtype=torch.float32)
+    """float [B, K, FEATURES] of the perception's output: ``features_from_masses`` of its vote clusters,
+    with each class's area the sum of its probabilities (px)."""
     area = probs[:, 1:].flatten(2).sum(-1) * cell_px                               # [B, K-1] px
-    for i, per_class in enumerate(clusters(probs, votes, cell_px, **kwargs)):
+    return features_from_masses(clusters(probs, votes, cell_px, **kwargs), area, min_px)
+
+
+def features_from_masses(masses, area: torch.Tensor, min_px: float = COUNTABLE_PX) -> torch.Tensor:
+    """float [B, K, FEATURES] from per image and class (1 … K-1) the objects' visible masses (px) and the
+    classes' areas [B, K-1]: row c ≥ 1 the class c (count one-hot, top masses, area), aligned with the
+    class channels; row 0 the image-wide entry: the number of counted objects of every class (/ 50, first
+    entry). The true masses (every object's visible pixels) give what a perfect perception would."""
+    b, k = area.shape[0], area.shape[1] + 1
+    feats = torch.zeros(b, k, FEATURES, dtype=torch.float32)
+    for i, per_class in enumerate(masses):
         total = 0
         for c, m in enumerate(per_class):
             n = int((m >= min_px).sum())
