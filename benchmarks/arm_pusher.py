@@ -1,4 +1,4 @@
-"""The arm pusher measured against the finger (issue 12).
+"""The arm pusher measured against the finger.
 
     python benchmarks/arm_pusher.py reach                       # IK over the 28 x 28 x 8 grid pushes (~15 min)
     python benchmarks/arm_pusher.py steps --dataset data/mqa    # finger vs arm: step time, tip error (same actions)

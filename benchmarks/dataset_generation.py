@@ -2,7 +2,7 @@
 
     python benchmarks/dataset_generation.py [--seed 0] [--out /tmp/mqa_bench]
 
-Goal (issue 2): ≤ 5 minutes on a 2-core machine.
+Goal: ≤ 5 minutes on a 2-core machine.
 """
 
 from __future__ import annotations

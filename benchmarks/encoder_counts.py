@@ -1,7 +1,7 @@
 """How well does a pretrained VQA encoder count the asked class on scenes it never saw? Its density head's
 sum for the question's class, rounded (0-3), against the targets with >= 20 visible pixels (what
 evaluate.py's perfect counter reads) and against the answer, per level, on a system's test rollouts. It judges
-an encoder in seconds, before any VQA is trained on it (README, "Which class is the question about?").
+an encoder in seconds, before any VQA is trained on it (docs/results.md, "Which class is the question about?").
 
     python benchmarks/encoder_counts.py --encoder checkpoints/vqa_encoder/encoder.pt \
         --rollouts runs/answering/rollouts/counting/no_manipulation/test

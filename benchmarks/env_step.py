@@ -3,7 +3,7 @@ raw render, no wrapper work), reset, construction in a fresh process, MultiSyncC
 
     python benchmarks/env_step.py --dataset data/mqa [--pushes 60] [--skip-collectors]
 
-Goals (issue 3): hard step ≤ 150 ms median, step / floor ≤ 1.3, reset ≤ 150 ms,
+Goals: hard step ≤ 150 ms median, step / floor ≤ 1.3, reset ≤ 150 ms,
 2 collector workers ≥ 1.7 × 1 worker.
 """
 

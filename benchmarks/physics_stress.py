@@ -6,7 +6,7 @@ pushes (knocked out by the arm's links), and unreachable pushes.
 
     python benchmarks/physics_stress.py --dataset data/mqa [--pushes 2000] [--pusher arm]
 
-Goal (issue 3): 0 escapes, 0 NaN.
+Goal: 0 escapes, 0 NaN.
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ Per fold (scenes split by a hash of their id, as fit_stop's hold-out), a critic 
 and its rule scored on this one: stop when the predicted gain of pushing on is >= a threshold (0 is the rule
 ``LearnedStop`` runs; inf never stops), and the same rule from an average of ``--members`` critics fitted on
 bootstrap resamples (bagging). Prints the mean final χ of the targets and the mean pushes per level. The test
-split is never read (docs/policy_attempts.md, "A look at the stop").
+split is never read (docs/notebook/policy_attempts.md, "A look at the stop").
 
     python benchmarks/stop_rule_cv.py runs/student_s3/stop runs/student/stop_mem1
 """

@@ -2,7 +2,7 @@
 
 The paper's Q-network recognises the asked-about class with ImageNet features fine-tuned by the DQN
 reward. Offline and on 2 CPU cores neither is at hand: from the reward alone the light trunk learnt
-nothing about where targets are in 1,400 updates (README, issue 9). Here the rgb trunk and a 1×1
+nothing about where targets are in 1,400 updates (docs/results.md, "The paper's three variants"). Here the rgb trunk and a 1×1
 class head learn the class fractions of every action-grid cell from the simulator's segmentation
 (``SapienBinEnv.class_cells``) on train-split renders; then the question encoder and its attention
 over the classes learn which class each train-split question asks about (from the dataset's questions,

@@ -1,4 +1,4 @@
-"""The arm pusher (a Panda with a stick, issue 12) on real SAPIEN scenes: loading, a push that moves an
+"""The arm pusher (a Panda with a stick) on real SAPIEN scenes: loading, a push that moves an
 object with the tip on the line, out of the image when rendered, bit-identical replays, reporting,
 and the error without the optional package."""
 

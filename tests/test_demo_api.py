@@ -1,7 +1,7 @@
 """The web demo through its HTTP API (gradio_client), as a second program or a page would use it:
 episodes stream frames and end with the true answer and a video; bad questions and unusable
 checkpoints get clear messages; two sessions run at once without interfering; a cancelled episode
-gives its env back. The VQA adapter is checked with a stand-in model honouring issue 10's contract."""
+gives its env back. The VQA adapter is checked with a stand-in model honouring the VQA's public contract."""
 
 from __future__ import annotations
 
@@ -172,7 +172,7 @@ def test_cancelled_episode_gives_its_env_back(served, monkeypatch):
 
 # ---------------------------------------------------------------------------------- VQA adapter
 class StandInVQA:
-    """Honours issue 10's contract: answer_probs(tokens [B, L], first [B, H, W, 3], last) -> [B, n]."""
+    """Honours the VQA's public contract: answer_probs(tokens [B, L], first [B, H, W, 3], last) -> [B, n]."""
 
     answers = ["0", "1", "2", "3", "yes", "no"]
 
@@ -224,7 +224,7 @@ def test_vqa_problems_are_reported_not_raised(monkeypatch):
 
     from mqa_rl.demo import vqa_adapter
 
-    monkeypatch.setitem(sys.modules, "mqa_rl.modules.vqa", None)         # the module absent (before issue 10)
+    monkeypatch.setitem(sys.modules, "mqa_rl.modules.vqa", None)         # the module absent
     registry = vqa_adapter.VQARegistry(["some/checkpoint"])
     assert not registry.names and "not in this version" in registry.missing_reason()
     assert registry.answer(None, None, None, None).startswith("no VQA checkpoint")
