@@ -128,7 +128,7 @@ def evaluate_system(cfg: DictConfig, ds: MQADataset, name: str, plan_sha: str) -
               "counter_first": ans.accuracy_table(ans.counter_right(sub, ds.answers, keys.FIRST), sub),
               "counter_last": ans.accuracy_table(ans.counter_right(sub, ds.answers, keys.LAST), sub),
               "counter_either": ans.accuracy_table(ans.counter_right(sub, ds.answers, ans.EITHER), sub),
-              **calibrated_counter(Path(cfg.rollouts_dir) / name / "train", sub),
+              **calibrated_counter(Path(cfg.calibration_rollouts_dir) / name / "train", sub),
               "policy": ans.policy_stats(records),
               "seconds": {"collect_or_load": round(collect_seconds, 1), "answer": round(time.perf_counter() - t1, 1)}}
     return result, records, right
@@ -174,8 +174,25 @@ def evaluate(cfg: DictConfig) -> dict:
                 lv: ans.paired_difference(right, records, r_right[r_mask], r_rec[r_mask],
                                           mask_a=counting & (records.get(keys.LEVEL) == i))
                 for i, lv in enumerate(LEVELS)}
-    # paired differences to the answer prior (the training split's majority answer per type and level)
-    prior = ans.prior_answers(ds, "train")
+    # intervals that resample scenes: every system's accuracy, and its difference to no manipulation
+    for name, (records, right) in data.items():
+        results["systems"][name]["accuracy_by_scene"] = ans.accuracy_by_scene(right, records)
+    if "no_manipulation" in data:
+        n_rec, n_right = data["no_manipulation"]
+        n_mask = n_rec.get(keys.TYPE_LABEL) == QUESTION_TYPES.index("counting")
+        for name, (records, right) in data.items():
+            counting = records.get(keys.TYPE_LABEL) == QUESTION_TYPES.index("counting")
+            if name != "no_manipulation":
+                results["systems"][name]["vs_no_manipulation_by_scene"] = {
+                    lv: ans.paired_difference_by_scene(right, records, n_right[n_mask], n_rec[n_mask],
+                                                       mask_a=counting & (records.get(keys.LEVEL) == i))
+                    for i, lv in enumerate(LEVELS)}
+    # paired differences to the answer prior (the training split's majority answer per type and level; a
+    # held-out set of fresh piles has no training split: ``prior_dataset`` names the one that has)
+    prior = ans.prior_answers(MQADataset(cfg.prior_dataset) if str(cfg.prior_dataset) != str(cfg.dataset) else ds, "train")
+    if not prior:
+        raise ValueError(f"{cfg.prior_dataset} has no training split to take the answer prior from: set prior_dataset= "
+                         f"to the dataset the VQAs were trained on (e.g. data/mqa)")
     for name, (records, right) in data.items():
         counting = records.get(keys.TYPE_LABEL) == QUESTION_TYPES.index("counting")
         results["systems"][name]["vs_prior"] = {
@@ -213,6 +230,7 @@ def evaluate(cfg: DictConfig) -> dict:
             import plot_curves                        # recipes/plot_curves.py, beside this script
 
             plot_curves.plot(runs, out / "fig7_rewards.png")
+    report.write_atomic(out / "by_scene.md", report.by_scene_markdown(results))
     report.write_atomic(out / "results.json", json.dumps(results, indent=1, default=float))
     print(f"\n{head}\n\n{t3}\n")
     print("\n".join(verdict))

@@ -123,6 +123,12 @@ def test_evaluate_writes_table3_and_names_what_is_missing(small_dataset, trained
     either, last = sys_res["random"]["counter_calibrated_either"]["counting"], sys_res["random"]["counter_calibrated"]["counting"]
     assert set(either) == set(last) and "calibrated on either" in (out / "policy.md").read_text()
     assert "on either" in (out / "policy.md").read_text() and "counter_either" in rows[0]
+    # intervals that resample scenes: an accuracy inside its own interval, and the paired gain over no manipulation
+    for lv, (mean, low, high, scenes) in sys_res["random"]["accuracy_by_scene"].items():
+        assert low <= mean <= high and scenes >= 1
+        assert mean == pytest.approx(sys_res["random"]["accuracy"]["counting"][lv]["accuracy"])
+    diff = sys_res["random"]["vs_no_manipulation_by_scene"]["easy"]
+    assert diff[1] <= diff[0] <= diff[2] and "no manipulation" in (out / "by_scene.md").read_text()
     assert json.loads((out / "results.json").read_text())["systems"]["random"]["episodes"] == 4
 
 

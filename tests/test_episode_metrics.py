@@ -58,3 +58,18 @@ def test_the_env_records_which_targets_were_in_view_at_reset_and_keeps_it(small_
         assert env.observation_spec[keys.TARGETS_IN_VIEW_START].is_in(td.get(keys.TARGETS_IN_VIEW_START))
     finally:
         env.close()
+
+
+def test_scene_bootstrap_interval_widens_when_a_scene_decides_its_questions_together():
+    import torch
+
+    from mqa_rl.evaluation.episode_metrics import scene_bootstrap_ci95
+
+    # 10 scenes of 20 questions: right or wrong by whole scene, vs the same 200 answers shuffled over scenes
+    clustered = torch.tensor([1.0] * 100 + [0.0] * 100)
+    scenes = torch.arange(10).repeat_interleave(20)
+    mean, low, high, n = scene_bootstrap_ci95(clustered, scenes)
+    assert mean == 0.5 and n == 10 and low < 0.3 and high > 0.7
+    mixed = clustered[torch.randperm(200, generator=torch.Generator().manual_seed(0))]
+    _, low_m, high_m, _ = scene_bootstrap_ci95(mixed, scenes)
+    assert high_m - low_m < 0.6 * (high - low)

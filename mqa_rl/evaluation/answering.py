@@ -6,6 +6,8 @@
   stays inside [0, 1] for the small groups of tiny runs.
 * ``paired_difference``: system A − system B on the questions both answered (the test plan is the same
   for every system, so the difference is paired by question, much tighter than two separate intervals).
+* ``accuracy_by_scene`` / ``paired_difference_by_scene``: the same with intervals that resample whole
+  scenes, as a result on 9-12 test piles per level, or on a held-out set of fresh piles, needs.
 * ``counter_right``: whether a *perfect counter* (counts the targets with ≥ ``min_px`` visible pixels)
   would answer a COUNTING question right from the episode's first or last image: what the images
   allow, whatever the VQA makes of them (the occlusion benchmark's rule). ``frame=EITHER``: the targets
@@ -31,7 +33,7 @@ from tensordict import TensorDict
 from mqa_rl import keys
 from mqa_rl.data.dataset import LEVELS
 from mqa_rl.data.questions import QUESTION_TYPES
-from mqa_rl.evaluation.episode_metrics import mean_ci95
+from mqa_rl.evaluation.episode_metrics import mean_ci95, scene_bootstrap_ci95
 from mqa_rl.transforms.episode_stats import COUNTABLE_PX
 
 EITHER = "either"          # countable_targets' frame: a target countable in I_start or in I_stop
@@ -98,6 +100,30 @@ def paired_difference(right_a: torch.Tensor, records_a: TensorDict, right_b: tor
     b = _per_question(right_b, records_b.get(keys.QUESTION_ID))
     common = sorted(set(a) & set(b))
     return mean_ci95(torch.tensor([a[q] - b[q] for q in common], dtype=torch.float64))
+
+
+def paired_difference_by_scene(right_a: torch.Tensor, records_a: TensorDict, right_b: torch.Tensor,
+                               records_b: TensorDict, mask_a: torch.Tensor | None = None) -> tuple[float, float, float, int]:
+    """(mean of A − B, low, high, scenes): ``paired_difference`` with a 95 % interval that resamples whole
+    scenes (``scene_bootstrap_ci95``): one pile's questions share its occlusions, so they are not independent."""
+    mask_a = torch.ones_like(right_a, dtype=torch.bool) if mask_a is None else mask_a
+    a = _per_question(right_a[mask_a], records_a.get(keys.QUESTION_ID)[mask_a])
+    b = _per_question(right_b, records_b.get(keys.QUESTION_ID))
+    scene = dict(zip(records_a.get(keys.QUESTION_ID).tolist(), records_a.get(keys.SCENE).tolist()))
+    common = sorted(set(a) & set(b))
+    return scene_bootstrap_ci95(torch.tensor([a[q] - b[q] for q in common], dtype=torch.float64),
+                                torch.tensor([scene[q] for q in common], dtype=torch.int64))
+
+
+def accuracy_by_scene(right: torch.Tensor, records: TensorDict) -> dict[str, tuple[float, float, float, int]]:
+    """{level: (accuracy, low, high, scenes)} of COUNTING records with scene-resampled 95 % intervals."""
+    counting = records.get(keys.TYPE_LABEL) == QUESTION_TYPES.index("counting")
+    out = {}
+    for i, level in enumerate(LEVELS):
+        m = counting & (records.get(keys.LEVEL) == i)
+        if m.any():
+            out[level] = scene_bootstrap_ci95(right[m].double(), records.get(keys.SCENE)[m])
+    return out
 
 
 def countable_targets(records: TensorDict, frame: str = keys.LAST, min_px: float = COUNTABLE_PX) -> torch.Tensor:
