@@ -20,8 +20,8 @@ from mqa_rl import keys
 from mqa_rl.data import MQADataset
 from mqa_rl.data.dataset import LEVELS
 from mqa_rl.envs.sapien_bin import SapienBinEnv
-from mqa_rl.evaluation.answering_report import write_atomic
 from mqa_rl.evaluation.episode_metrics import scene_bootstrap_ci95
+from mqa_rl.files import write_atomic
 from mqa_rl.modules import vote_counting
 from mqa_rl.modules.perception import load_perception
 from mqa_rl.transforms.episode_stats import COUNTABLE_PX

@@ -43,6 +43,7 @@ from mqa_rl.data.dataset import LEVELS  # noqa: E402
 from mqa_rl.data.questions import QUESTION_TYPES  # noqa: E402
 from mqa_rl.evaluation import answering as ans  # noqa: E402
 from mqa_rl.evaluation import answering_report as report  # noqa: E402
+from mqa_rl.files import write_atomic  # noqa: E402
 from mqa_rl.modules.frozen_policies import resolve_checkpoint, system_spec  # noqa: E402
 from mqa_rl.modules.vqa import CHECKPOINT_NAME, load_vqa  # noqa: E402
 from mqa_rl.modules.vqa_ensemble import VQAEnsemble  # noqa: E402
@@ -214,13 +215,13 @@ def evaluate(cfg: DictConfig) -> dict:
             f"half-width; paper: Table III of Deng et al. 2021")
     t3 = report.table3_markdown(results)
     verdict = report.verdict(results)
-    report.write_atomic(out / "table3.md", f"{head}\n\n{t3}\n\n" + "\n".join(f"- {v}" for v in verdict) + "\n")
-    report.write_atomic(out / "table3.csv", report.rows_csv(results))
+    write_atomic(out / "table3.md", f"{head}\n\n{t3}\n\n" + "\n".join(f"- {v}" for v in verdict) + "\n")
+    write_atomic(out / "table3.csv", report.rows_csv(results))
     report.table3_figure(results, out / "table3.png")
     per_type = report.per_type_markdown(results)
-    report.write_atomic(out / "per_type.md", f"Accuracy per question type and level (± Wilson 95 %)\n\n{per_type}\n")
+    write_atomic(out / "per_type.md", f"Accuracy per question type and level (± Wilson 95 %)\n\n{per_type}\n")
     policy = report.policy_markdown(results)
-    report.write_atomic(out / "policy.md", "Policies on the test rollouts (± 95 %); perfect counter: targets with "
+    write_atomic(out / "policy.md", "Policies on the test rollouts (± 95 %); perfect counter: targets with "
                                           f">= 20 visible px counted, COUNTING only\n\n{policy}\n")
     if cfg.fig7:
         runs = [Path(results["systems"][n]["policy_spec"]["run"]) for n in data
@@ -230,8 +231,8 @@ def evaluate(cfg: DictConfig) -> dict:
             import plot_curves                        # recipes/plot_curves.py, beside this script
 
             plot_curves.plot(runs, out / "fig7_rewards.png")
-    report.write_atomic(out / "by_scene.md", report.by_scene_markdown(results))
-    report.write_atomic(out / "results.json", json.dumps(results, indent=1, default=float))
+    write_atomic(out / "by_scene.md", report.by_scene_markdown(results))
+    write_atomic(out / "results.json", json.dumps(results, indent=1, default=float))
     print(f"\n{head}\n\n{t3}\n")
     print("\n".join(verdict))
     print(f"\n{per_type}\n\n{policy}\n\nwritten to {out}")

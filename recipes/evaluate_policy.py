@@ -32,9 +32,9 @@ from omegaconf import DictConfig, OmegaConf
 from mqa_rl.envs.factory import make_mqa_env
 from mqa_rl.envs.qmap_overlay import qmap_episode_frames
 from mqa_rl.envs.video import write_video
-from mqa_rl.evaluation.answering_report import write_atomic
 from mqa_rl.evaluation.episode_metrics import mean_ci95
 from mqa_rl.evaluation.rollouts import run_episodes
+from mqa_rl.files import write_atomic
 from mqa_rl.modules.frozen_policies import PushBudget, StopMargin, make_frozen_policy
 from mqa_rl.modules.learned_stop import LearnedStop
 from mqa_rl.modules.random_policy import RandomMQAPolicy

@@ -26,7 +26,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from mqa_rl import keys
 from mqa_rl.envs.factory import make_mqa_env
-from mqa_rl.evaluation.answering_report import write_atomic
+from mqa_rl.files import write_atomic
 from mqa_rl.modules.frozen_policies import StopMargin
 from mqa_rl.modules.learned_stop import FEATURES, policy_fingerprint, policy_net, stop_features
 from mqa_rl.modules.trained_policy import load_greedy

@@ -44,7 +44,7 @@ from mqa_rl.collectors.class_frames import collect_class_frames  # noqa: E402
 from mqa_rl.data.dataset import dataset_fingerprint  # noqa: E402
 from mqa_rl.data import MQADataset  # noqa: E402
 from mqa_rl.envs.sapien_bin import SapienBinEnv  # noqa: E402
-from mqa_rl.evaluation.answering_report import write_atomic  # noqa: E402
+from mqa_rl.files import write_atomic  # noqa: E402
 from mqa_rl.losses.class_cells import ClassCellsLoss  # noqa: E402
 from mqa_rl.modules.pretrained_recognition import load_recognition, save_recognition  # noqa: E402
 from mqa_rl.modules.push_policy import make_push_qnet  # noqa: E402

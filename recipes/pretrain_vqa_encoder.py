@@ -35,7 +35,7 @@ from tqdm import tqdm  # noqa: E402
 from mqa_rl import keys  # noqa: E402
 from mqa_rl.data import MQADataset  # noqa: E402
 from mqa_rl.data.dataset import dataset_fingerprint  # noqa: E402
-from mqa_rl.evaluation.answering_report import write_atomic  # noqa: E402
+from mqa_rl.files import write_atomic  # noqa: E402
 from mqa_rl.losses.encoder_pretraining import EncoderPretrainLoss  # noqa: E402
 from mqa_rl.modules.vqa_encoder import FrameEncoder, PretrainHeads, save_encoder  # noqa: E402
 from mqa_rl.training.frame_pack import load_frame_pack, save_frame_pack  # noqa: E402

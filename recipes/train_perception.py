@@ -29,7 +29,7 @@ from tqdm import tqdm
 from mqa_rl import keys
 from mqa_rl.collectors.perception_frames import load_frames
 from mqa_rl.collectors.store import read_meta
-from mqa_rl.evaluation.answering_report import write_atomic
+from mqa_rl.files import write_atomic
 from mqa_rl.losses.perception import PerceptionLoss
 from mqa_rl.modules import vote_counting
 from mqa_rl.modules.perception import CountingPerception, save_perception

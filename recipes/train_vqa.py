@@ -36,7 +36,7 @@ from mqa_rl.data.dataset import dataset_fingerprint  # noqa: E402
 from mqa_rl.collectors.store import read_meta  # noqa: E402
 from mqa_rl.data import MQADataset  # noqa: E402
 from mqa_rl.data.dataset import LEVELS  # noqa: E402
-from mqa_rl.evaluation.answering_report import write_atomic  # noqa: E402
+from mqa_rl.files import write_atomic  # noqa: E402
 from mqa_rl.losses.vqa import VQALoss  # noqa: E402
 from mqa_rl.modules.vqa import CHECKPOINT_NAME, VQAModel, grounding_module, save_vqa, vqa_module  # noqa: E402
 from mqa_rl.modules.perception import load_perception  # noqa: E402

@@ -13,24 +13,16 @@ from __future__ import annotations
 import csv
 import io
 import math
-import os
 from pathlib import Path
 
 from mqa_rl.data.dataset import LEVELS
 from mqa_rl.evaluation.paper import PAPER_BEST, PAPER_NAMES, TABLE_III, VARIANT_FAMILIES
+from mqa_rl.files import write_atomic
 
 # the perfect counters of a system's results, in the order policy.md and table3.csv show them
 COUNTERS = ("counter_first", "counter_last", "counter_either", "counter_calibrated", "counter_calibrated_either")
 CSV_HEADER = ["system", "status", "type", "level", "accuracy", "low", "high", "n", "paper", "vs_random", "vs_random_ci95",
               "vs_prior", "vs_prior_ci95", "pushes", "chi_end", "chi_change", *COUNTERS]
-
-
-def write_atomic(path: Path, text: str | bytes) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    tmp.write_bytes(text if isinstance(text, bytes) else text.encode())
-    os.replace(tmp, path)
-    return path
 
 
 def save_figure(fig, path: Path, dpi: int = 120) -> Path:

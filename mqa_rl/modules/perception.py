@@ -27,8 +27,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from mqa_rl.files import load_versioned, save_versioned
 from mqa_rl.modules.vqa_encoder import standardise
-from mqa_rl.training.versioned_file import load_versioned, save_versioned
 
 PERCEPTION_FORMAT = "mqa_rl.perception"
 PERCEPTION_VERSION = 1

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from mqa_rl.training.versioned_file import load_versioned, save_versioned
+from mqa_rl.files import load_versioned, save_versioned
 
 RECOGNITION_FORMAT = "mqa_rl.push_recognition"
 RECOGNITION_VERSION = 1

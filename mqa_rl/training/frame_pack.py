@@ -21,7 +21,7 @@ import torch
 from tensordict import TensorDict
 
 from mqa_rl import keys
-from mqa_rl.evaluation.answering_report import write_atomic
+from mqa_rl.files import write_atomic
 
 FORMAT = "mqa_rl.frame_pack/1"
 PACK_KEYS = (keys.RGB, keys.DEPTH, keys.OBJECT_MAP, keys.CLASS_MAP, keys.SCENE, keys.LEVEL)

@@ -1,21 +1,35 @@
-"""A small model file: a dict tagged with its format and version, written atomically, read with errors
-that say what to do (missing, unreadable or truncated, foreign, newer than this mqa_rl).
+"""Files written whole or not at all, and small tagged model files: the bottom of the house (imports
+nothing else from mqa_rl).
 
-Used by the push recognition file and the stop critic; training checkpoints use ``torchrl.checkpoint``.
+``write_atomic`` writes through a hidden temporary sibling and a rename, so a reader (or a run killed
+mid-write) never sees half a file. ``save_versioned`` / ``load_versioned``: a dict tagged with its
+format and version, written atomically, read with errors that say what to do (missing, unreadable or
+truncated, foreign, newer than this mqa_rl); used by the push recognition file, the stop critic and
+the perception. Training checkpoints use ``torchrl.checkpoint`` (``mqa_rl.training.checkpoint``).
+
+Importing this module does not import torch (the report writers use ``write_atomic``).
 """
 
 from __future__ import annotations
 
 import io
+import os
 from pathlib import Path
 
-import torch
 
-from mqa_rl.evaluation.answering_report import write_atomic
+def write_atomic(path: Path, text: str | bytes) -> Path:
+    """``text`` (str: UTF-8) to ``path``, its folder made if missing, through a temporary file and a rename."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    tmp.write_bytes(text if isinstance(text, bytes) else text.encode())
+    os.replace(tmp, path)
+    return path
 
 
 def save_versioned(path: str | Path, fmt: str, version: int, blob: dict) -> Path:
     """``blob`` with ``format`` and ``version`` to ``path``, through a temporary file and a rename."""
+    import torch
+
     buffer = io.BytesIO()
     torch.save({"format": fmt, "version": int(version), **blob}, buffer)
     return write_atomic(Path(path), buffer.getvalue())
@@ -24,6 +38,8 @@ def save_versioned(path: str | Path, fmt: str, version: int, blob: dict) -> Path
 def load_versioned(path: str | Path, fmt: str, version: int, *, what: str, hint: str) -> dict:
     """The dict saved at ``path`` by ``save_versioned(path, fmt, ...)``; FileNotFoundError or ValueError
     naming ``what`` the file should be and ``hint`` (how to make one)."""
+    import torch
+
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no {what} at {path}: {hint}")
