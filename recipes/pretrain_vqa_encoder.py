@@ -142,9 +142,7 @@ def pretrain(cfg: DictConfig) -> dict:
         return json.loads((out / "summary.json").read_text()) if (out / "summary.json").exists() else dict(state)
     config = OmegaConf.to_container(cfg, resolve=True)
     if not (out / "config.yaml").exists():
-        tmp = out / f".config.yaml.tmp{os.getpid()}"
-        OmegaConf.save(OmegaConf.create(config), tmp)
-        os.replace(tmp, out / "config.yaml")
+        write_atomic(out / "config.yaml", OmegaConf.to_yaml(OmegaConf.create(config)))
     logger = RunLogger(out, wandb=cfg.logger.wandb, project=cfg.logger.project, exp_name="vqa_encoder", config=config)
     meta = {"dataset_sha256": source["dataset_sha256"], "classes": list(source["classes"]), "frames": len(frames),
             "stores": list(source["stores"])}

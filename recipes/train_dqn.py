@@ -40,6 +40,7 @@ from mqa_rl.envs.qmap_overlay import qmap_episode_frames, qmap_image
 from mqa_rl.envs.video import write_video
 from mqa_rl.evaluation.episode_metrics import episode_metrics, summarise
 from mqa_rl.evaluation.rollouts import run_episodes
+from mqa_rl.files import write_atomic
 from mqa_rl.losses.augment import DihedralAugment
 from mqa_rl.losses.demonstration import DemonstrationLoss
 from mqa_rl.losses.dqn import make_dqn_loss
@@ -236,9 +237,7 @@ def train(cfg: DictConfig) -> dict:
     config = OmegaConf.to_container(cfg, resolve=True)
     # what recipes/evaluate_policy.py rebuilds the network from; rewritten by every (resumed) invocation, so it
     # states the settings that made the newest checkpoint (e.g. a lengthened demos.pretrain_updates)
-    tmp = out / f".config.yaml.tmp{os.getpid()}"
-    OmegaConf.save(OmegaConf.create(config), tmp)
-    os.replace(tmp, out / "config.yaml")
+    write_atomic(out / "config.yaml", OmegaConf.to_yaml(OmegaConf.create(config)))
     logger = RunLogger(out, wandb=cfg.logger.wandb, project=cfg.logger.project,
                        exp_name=f"dqn_{cfg.reward.name}_{cfg.model.trunk}", config=config)
 

@@ -188,9 +188,7 @@ def train(cfg: DictConfig) -> dict:
 
     config = OmegaConf.to_container(cfg, resolve=True)
     if not (out / "config.yaml").exists():
-        tmp = out / f".config.yaml.tmp{os.getpid()}"
-        OmegaConf.save(OmegaConf.create(config), tmp)
-        os.replace(tmp, out / "config.yaml")
+        write_atomic(out / "config.yaml", OmegaConf.to_yaml(OmegaConf.create(config)))
     logger = RunLogger(out, wandb=cfg.logger.wandb, project=cfg.logger.project,
                        exp_name=f"vqa_{cfg.vqa.name}_{cfg.system}", config=config)
     vqa_meta = {"system": cfg.system, "questions": cfg.questions.name, "question_types": list(cfg.questions.types),

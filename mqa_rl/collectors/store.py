@@ -28,6 +28,7 @@ import torch
 from tensordict import TensorDict
 
 from mqa_rl import keys
+from mqa_rl.files import write_atomic
 
 META = "meta.json"
 CHUNK_PREFIX = "chunk-"
@@ -72,9 +73,7 @@ class EpisodeStore:
                 raise StoreError(f"{self.root} holds another collection (differs in {diff}); choose another out_dir, "
                                  f"or pass overwrite=true to replace it")
         else:
-            tmp = self.root / f".{META}.tmp{os.getpid()}"
-            tmp.write_text(json.dumps(self.meta, indent=1, sort_keys=True))
-            os.replace(tmp, path)
+            write_atomic(path, json.dumps(self.meta, indent=1, sort_keys=True))
 
     def close(self) -> None:
         if not self._lock.closed:

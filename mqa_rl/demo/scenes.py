@@ -11,13 +11,13 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
 
 from mqa_rl.data.dataset import LEVELS, SPLITS, MQADataset
+from mqa_rl.files import write_atomic
 from mqa_rl.sim.geometry import CameraSpec
 from mqa_rl.sim.scene import build_world
 
@@ -64,10 +64,13 @@ class SceneCatalog:
     def _render(self, scene, camera: CameraSpec, path: Path) -> None:
         world = build_world(self.dataset.assets(scene), scene.poses, bin_spec=self.dataset.bin, camera=camera)
         rgb = world.render()[0]
-        tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}.png")        # another server may share the cache
-        if not cv2.imwrite(str(tmp), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)):
-            raise OSError(f"cannot write {tmp}; is the demo's cache_dir writable?")
-        os.replace(tmp, path)
+        ok, png = cv2.imencode(".png", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
+        if not ok:
+            raise OSError(f"OpenCV cannot encode the first image of {scene.id} as PNG")
+        try:
+            write_atomic(path, png.tobytes())                               # another server may share the cache
+        except OSError as error:
+            raise OSError(f"cannot write {path}; is the demo's cache_dir writable?") from error
 
     def select(self, level: str = ALL, split: str = ALL) -> list[SceneCard]:
         """Cards of one level and split (``"all"`` for either); unknown names are refused."""

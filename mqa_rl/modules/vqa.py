@@ -47,8 +47,8 @@ raise ``ValueError`` for a word or token outside the model's vocabulary.
 
 from __future__ import annotations
 
+import io
 import math
-import os
 from pathlib import Path
 
 import torch
@@ -58,6 +58,7 @@ from torch import nn
 
 from mqa_rl import keys
 from mqa_rl.data.vocab import PAD, UNK, words
+from mqa_rl.files import write_atomic
 from mqa_rl.modules.push_qnet import QuestionEncoder
 from mqa_rl.modules import vote_counting
 from mqa_rl.modules.perception import CountingPerception
@@ -362,14 +363,12 @@ def vqa_module(model: VQAModel, *, from_features: bool = False) -> TensorDictMod
 def save_vqa(model: VQAModel, path: str | Path, meta: dict | None = None) -> Path:
     """Write a self-describing VQA checkpoint (config, vocabularies, weights, ``meta``) atomically."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     blob = {"format": VQA_FORMAT, "version": VQA_VERSION, "config": dict(model.config), "vocab": list(model.vocab),
             "answers": list(model.answers), "state_dict": {k: v.detach().cpu() for k, v in model.state_dict().items()},
             "meta": dict(meta or {})}
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    torch.save(blob, tmp)
-    os.replace(tmp, path)
-    return path
+    buffer = io.BytesIO()
+    torch.save(blob, buffer)
+    return write_atomic(path, buffer.getvalue())
 
 
 def load_vqa(path: str | Path, map_location: str | torch.device = "cpu") -> VQAModel:

@@ -26,12 +26,14 @@ trained on; ``recipes/pretrain_vqa_encoder.py`` writes it and ``recipes/train_vq
 
 from __future__ import annotations
 
-import os
+import io
 from pathlib import Path
 
 import torch
 import torch.nn.functional as F
 from torch import nn
+
+from mqa_rl.files import write_atomic
 
 ENCODER_FORMAT = "mqa_rl.vqa_encoder"
 ENCODER_VERSION = 1
@@ -149,15 +151,13 @@ class PretrainHeads(nn.Module):
 def save_encoder(encoder: FrameEncoder, path: str | Path, meta: dict) -> Path:
     """Write the encoder's weights and ``meta`` (what it was trained on, its validation scores) atomically."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     blob = {"format": ENCODER_FORMAT, "version": ENCODER_VERSION,
             "config": {"channels": list(encoder.channels), "image_size": encoder.image_size,
                        "num_classes": encoder.num_classes, "head_width": encoder.head_width},
             "state_dict": {k: v.detach().cpu() for k, v in encoder.state_dict().items()}, "meta": dict(meta)}
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    torch.save(blob, tmp)
-    os.replace(tmp, path)
-    return path
+    buffer = io.BytesIO()
+    torch.save(blob, buffer)
+    return write_atomic(path, buffer.getvalue())
 
 
 def load_encoder(path: str | Path) -> tuple[FrameEncoder, dict]:

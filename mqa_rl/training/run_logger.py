@@ -9,13 +9,14 @@ the checkpoint are dropped first (``trim_scalars``), so no step is logged twice.
 
 from __future__ import annotations
 
-import os
 import warnings
 from pathlib import Path
 
 import cv2
 import numpy as np
 from torchrl.record.loggers import CSVLogger
+
+from mqa_rl.files import write_atomic
 
 
 def trim_scalars(csv_dir: str | Path, max_step: int, exclude: str | None = None) -> int:
@@ -29,9 +30,7 @@ def trim_scalars(csv_dir: str | Path, max_step: int, exclude: str | None = None)
         keep = [ln for ln in lines if ln and float(ln.split(",", 1)[0]) <= max_step]
         if len(keep) != len(lines):
             dropped += len(lines) - len(keep)
-            tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-            tmp.write_text("".join(f"{ln}\n" for ln in keep))
-            os.replace(tmp, path)
+            write_atomic(path, "".join(f"{ln}\n" for ln in keep))
     return dropped
 
 
@@ -64,9 +63,10 @@ class RunLogger:
 
     def log_image(self, name: str, image: np.ndarray, step: int) -> Path:
         path = self.media / f"{name.replace('/', '_')}_{step:07d}.png"
-        tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}.png")
-        cv2.imwrite(str(tmp), cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
-        os.replace(tmp, path)
+        ok, png = cv2.imencode(".png", cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
+        if not ok:
+            raise OSError(f"OpenCV cannot encode {name} (step {step}) as PNG")
+        write_atomic(path, png.tobytes())
         if self.wandb is not None:
             import wandb
 
