@@ -14,12 +14,11 @@ moves anything: what ε-exploration gains from the mask).
 
 from __future__ import annotations
 
-import os
-
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")   # as the recipe: idle OpenMP threads sleep
+import mqa_rl  # noqa: F401  (first: sets OMP_WAIT_POLICY before torch loads)
 
 import argparse
 import csv
+import os
 import statistics
 import subprocess
 import sys
@@ -32,16 +31,14 @@ import numpy as np
 import torch
 from omegaconf import OmegaConf
 from tensordict import TensorDict
+from torchrl.data import Categorical
 
-sys.path.insert(0, str(Path(__file__).parents[1]))
-
-from mqa_rl import keys  # noqa: E402
-from mqa_rl.envs import actions  # noqa: E402
-from mqa_rl.losses.dqn import make_dqn_loss  # noqa: E402
-from mqa_rl.losses.replay import compact_transitions, transition_bytes  # noqa: E402
-from mqa_rl.modules.push_policy import make_push_qnet, make_q_actor  # noqa: E402
-from mqa_rl.sim.geometry import BinSpec, CameraSpec  # noqa: E402
-from torchrl.data import Categorical  # noqa: E402
+from mqa_rl import keys
+from mqa_rl.envs import actions
+from mqa_rl.losses.dqn import make_dqn_loss
+from mqa_rl.losses.replay import compact_transitions, transition_bytes
+from mqa_rl.modules.push_policy import make_push_qnet, make_q_actor
+from mqa_rl.sim.geometry import BinSpec, CameraSpec
 
 VOCAB, QLEN, SIZE = 120, 14, 224
 CONF = Path(__file__).parents[1] / "recipes" / "conf" / "trunk"

@@ -12,18 +12,16 @@ defined in recipes/conf/answering/default.yaml; ``mqa_rl.collectors.rollouts`` s
 
 from __future__ import annotations
 
-import os
+import mqa_rl  # noqa: F401  (first: sets OMP_WAIT_POLICY before torch loads)
 
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")      # see train_dqn.py: idle threads must not spin
+from pathlib import Path
 
-from pathlib import Path  # noqa: E402
+import hydra
+from omegaconf import DictConfig, OmegaConf
 
-import hydra  # noqa: E402
-from omegaconf import DictConfig, OmegaConf  # noqa: E402
-
-from mqa_rl.collectors.rollouts import collect_split  # noqa: E402
-from mqa_rl.modules.frozen_policies import system_spec  # noqa: E402
-from mqa_rl.training.signals import exit_on_sigterm  # noqa: E402
+from mqa_rl.collectors.rollouts import collect_split
+from mqa_rl.modules.frozen_policies import system_spec
+from mqa_rl.training.signals import exit_on_sigterm
 
 
 def collect(cfg: DictConfig) -> list[dict]:

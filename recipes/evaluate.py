@@ -21,33 +21,31 @@ Writes to ``out_dir``: ``table3.md`` / ``.csv`` / ``.png``, ``per_type.md``, ``p
 
 from __future__ import annotations
 
-import os
+import mqa_rl  # noqa: F401  (first: sets OMP_WAIT_POLICY before torch loads)
 
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")      # see train_dqn.py: idle threads must not spin
+import json
+import time
+import warnings
+from pathlib import Path
 
-import json  # noqa: E402
-import time  # noqa: E402
-import warnings  # noqa: E402
-from pathlib import Path  # noqa: E402
+import hydra
+import torch
+from omegaconf import DictConfig, OmegaConf
+from tensordict import TensorDict
 
-import hydra  # noqa: E402
-import torch  # noqa: E402
-from omegaconf import DictConfig, OmegaConf  # noqa: E402
-from tensordict import TensorDict  # noqa: E402
-
-from mqa_rl import keys  # noqa: E402
-from mqa_rl.collectors.rollouts import collect_split, plan_questions, questions_sha256  # noqa: E402
-from mqa_rl.collectors.store import StoreError, load_records, read_meta  # noqa: E402
-from mqa_rl.data import MQADataset  # noqa: E402
-from mqa_rl.data.dataset import LEVELS  # noqa: E402
-from mqa_rl.data.questions import QUESTION_TYPES  # noqa: E402
-from mqa_rl.evaluation import answering as ans  # noqa: E402
-from mqa_rl.evaluation import answering_report as report  # noqa: E402
-from mqa_rl.files import write_atomic  # noqa: E402
-from mqa_rl.modules.frozen_policies import resolve_checkpoint, system_spec  # noqa: E402
-from mqa_rl.modules.vqa import CHECKPOINT_NAME, load_vqa  # noqa: E402
-from mqa_rl.modules.vqa_ensemble import VQAEnsemble  # noqa: E402
-from mqa_rl.training.vqa_data import IMAGE_KEYS, RECORD_KEYS  # noqa: E402
+from mqa_rl import keys
+from mqa_rl.collectors.rollouts import collect_split, plan_questions, questions_sha256
+from mqa_rl.collectors.store import StoreError, load_records, read_meta
+from mqa_rl.data import MQADataset
+from mqa_rl.data.dataset import LEVELS
+from mqa_rl.data.questions import QUESTION_TYPES
+from mqa_rl.evaluation import answering as ans
+from mqa_rl.evaluation import answering_report as report
+from mqa_rl.files import write_atomic
+from mqa_rl.modules.frozen_policies import resolve_checkpoint, system_spec
+from mqa_rl.modules.vqa import CHECKPOINT_NAME, load_vqa
+from mqa_rl.modules.vqa_ensemble import VQAEnsemble
+from mqa_rl.training.vqa_data import IMAGE_KEYS, RECORD_KEYS
 
 EVAL_KEYS = (*RECORD_KEYS, *IMAGE_KEYS, keys.EPISODE_TARGETS, (keys.FIRST, keys.FRAME_VISIBLE),
              (keys.LAST, keys.FRAME_VISIBLE))

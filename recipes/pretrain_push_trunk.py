@@ -22,35 +22,34 @@ run keeps its frames and its best file; rerunning trains afresh from the cached 
 
 from __future__ import annotations
 
+import mqa_rl  # noqa: F401  (first: sets OMP_WAIT_POLICY before torch loads)
+
+import json
 import os
+import random
+import shutil
+import time
+from pathlib import Path
 
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")      # see train_dqn.py: idle threads must not spin
+import hydra
+import numpy as np
+import torch
+from omegaconf import DictConfig, OmegaConf
+from tensordict import TensorDict
+from tqdm import tqdm
 
-import json  # noqa: E402
-import random  # noqa: E402
-import shutil  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
-
-import hydra  # noqa: E402
-import numpy as np  # noqa: E402
-import torch  # noqa: E402
-from omegaconf import DictConfig, OmegaConf  # noqa: E402
-from tensordict import TensorDict  # noqa: E402
-from tqdm import tqdm  # noqa: E402
-
-from mqa_rl import keys  # noqa: E402
-from mqa_rl.collectors.class_frames import collect_class_frames  # noqa: E402
-from mqa_rl.data.dataset import dataset_fingerprint  # noqa: E402
-from mqa_rl.data import MQADataset  # noqa: E402
-from mqa_rl.envs.sapien_bin import SapienBinEnv  # noqa: E402
-from mqa_rl.files import write_atomic  # noqa: E402
-from mqa_rl.losses.class_cells import ClassCellsLoss  # noqa: E402
-from mqa_rl.modules.pretrained_recognition import load_recognition, save_recognition  # noqa: E402
-from mqa_rl.modules.push_policy import make_push_qnet  # noqa: E402
-from mqa_rl.training.run_logger import RunLogger  # noqa: E402
-from mqa_rl.training.signals import exit_on_sigterm  # noqa: E402
-from mqa_rl.training.vqa_data import DIHEDRAL, dihedral, scene_split  # noqa: E402
+from mqa_rl import keys
+from mqa_rl.collectors.class_frames import collect_class_frames
+from mqa_rl.data.dataset import dataset_fingerprint
+from mqa_rl.data import MQADataset
+from mqa_rl.envs.sapien_bin import SapienBinEnv
+from mqa_rl.files import write_atomic
+from mqa_rl.losses.class_cells import ClassCellsLoss
+from mqa_rl.modules.pretrained_recognition import load_recognition, save_recognition
+from mqa_rl.modules.push_policy import make_push_qnet
+from mqa_rl.training.run_logger import RunLogger
+from mqa_rl.training.signals import exit_on_sigterm
+from mqa_rl.training.vqa_data import DIHEDRAL, dihedral, scene_split
 
 RECOGNITION_FILE = "recognition.pt"
 

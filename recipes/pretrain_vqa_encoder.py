@@ -15,34 +15,32 @@ recipes/train_vqa.py loads), ``checkpoints/`` (atomic, for resume=true), ``csv/`
 
 from __future__ import annotations
 
-import os
+import mqa_rl  # noqa: F401  (first: sets OMP_WAIT_POLICY before torch loads)
 
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")      # see train_dqn.py: idle threads must not spin
+import json
+import random
+import time
+from pathlib import Path
 
-import json  # noqa: E402
-import random  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
+import hydra
+import numpy as np
+import torch
+from omegaconf import DictConfig, OmegaConf
+from tensordict import TensorDict
+from torch import nn
+from tqdm import tqdm
 
-import hydra  # noqa: E402
-import numpy as np  # noqa: E402
-import torch  # noqa: E402
-from omegaconf import DictConfig, OmegaConf  # noqa: E402
-from tensordict import TensorDict  # noqa: E402
-from torch import nn  # noqa: E402
-from tqdm import tqdm  # noqa: E402
-
-from mqa_rl import keys  # noqa: E402
-from mqa_rl.data import MQADataset  # noqa: E402
-from mqa_rl.data.dataset import dataset_fingerprint  # noqa: E402
-from mqa_rl.files import write_atomic  # noqa: E402
-from mqa_rl.losses.encoder_pretraining import EncoderPretrainLoss  # noqa: E402
-from mqa_rl.modules.vqa_encoder import FrameEncoder, PretrainHeads, save_encoder  # noqa: E402
-from mqa_rl.training.frame_pack import load_frame_pack, save_frame_pack  # noqa: E402
-from mqa_rl.training.model_checkpoint import ModelCheckpoint  # noqa: E402
-from mqa_rl.training.run_logger import RunLogger, trim_scalars  # noqa: E402
-from mqa_rl.training.signals import exit_on_sigterm  # noqa: E402
-from mqa_rl.training.vqa_data import DIHEDRAL, dihedral, pretraining_frames, scene_split  # noqa: E402
+from mqa_rl import keys
+from mqa_rl.data import MQADataset
+from mqa_rl.data.dataset import dataset_fingerprint
+from mqa_rl.files import write_atomic
+from mqa_rl.losses.encoder_pretraining import EncoderPretrainLoss
+from mqa_rl.modules.vqa_encoder import FrameEncoder, PretrainHeads, save_encoder
+from mqa_rl.training.frame_pack import load_frame_pack, save_frame_pack
+from mqa_rl.training.model_checkpoint import ModelCheckpoint
+from mqa_rl.training.run_logger import RunLogger, trim_scalars
+from mqa_rl.training.signals import exit_on_sigterm
+from mqa_rl.training.vqa_data import DIHEDRAL, dihedral, pretraining_frames, scene_split
 
 ENCODER_FILE = "encoder.pt"
 

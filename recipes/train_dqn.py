@@ -13,18 +13,14 @@ sync weights; greedy evaluation on the test split and checkpoints every so many 
 
 from __future__ import annotations
 
-import os
+import mqa_rl  # noqa: F401  (first: sets OMP_WAIT_POLICY before torch loads)
 
-# Idle OpenMP threads sleep instead of spinning: with the env (and other people's jobs) on the same
-# 2 cores, spinning torch threads made updates 7-40x slower (measured); set before torch loads.
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-
-import copy  # noqa: E402
-import random  # noqa: E402
-import shutil  # noqa: E402
-import time  # noqa: E402
-import warnings  # noqa: E402
-from pathlib import Path  # noqa: E402
+import copy
+import random
+import shutil
+import time
+import warnings
+from pathlib import Path
 
 import hydra
 import numpy as np

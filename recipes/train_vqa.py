@@ -14,37 +14,35 @@ validation accuracy per level), ``config.yaml`` and ``summary.json``.
 
 from __future__ import annotations
 
-import os
+import mqa_rl  # noqa: F401  (first: sets OMP_WAIT_POLICY before torch loads)
 
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")      # see train_dqn.py: idle threads must not spin
+import json
+import math
+import random
+import time
+import warnings
+from pathlib import Path
 
-import json  # noqa: E402
-import math  # noqa: E402
-import random  # noqa: E402
-import time  # noqa: E402
-import warnings  # noqa: E402
-from pathlib import Path  # noqa: E402
+import hydra
+import numpy as np
+import torch
+from omegaconf import DictConfig, OmegaConf
+from tqdm import tqdm
 
-import hydra  # noqa: E402
-import numpy as np  # noqa: E402
-import torch  # noqa: E402
-from omegaconf import DictConfig, OmegaConf  # noqa: E402
-from tqdm import tqdm  # noqa: E402
-
-from mqa_rl import keys  # noqa: E402
-from mqa_rl.data.dataset import dataset_fingerprint  # noqa: E402
-from mqa_rl.collectors.store import read_meta  # noqa: E402
-from mqa_rl.data import MQADataset  # noqa: E402
-from mqa_rl.data.dataset import LEVELS  # noqa: E402
-from mqa_rl.files import write_atomic  # noqa: E402
-from mqa_rl.losses.vqa import VQALoss  # noqa: E402
-from mqa_rl.modules.vqa import CHECKPOINT_NAME, VQAModel, grounding_module, save_vqa, vqa_module  # noqa: E402
-from mqa_rl.modules.perception import load_perception  # noqa: E402
-from mqa_rl.modules.vqa_encoder import load_encoder  # noqa: E402
-from mqa_rl.training.model_checkpoint import ModelCheckpoint  # noqa: E402
-from mqa_rl.training.run_logger import RunLogger, trim_scalars  # noqa: E402
-from mqa_rl.training.signals import exit_on_sigterm  # noqa: E402
-from mqa_rl.training.vqa_data import (DIHEDRAL, Batches, encode_store, load_answering_records,  # noqa: E402
+from mqa_rl import keys
+from mqa_rl.data.dataset import dataset_fingerprint
+from mqa_rl.collectors.store import read_meta
+from mqa_rl.data import MQADataset
+from mqa_rl.data.dataset import LEVELS
+from mqa_rl.files import write_atomic
+from mqa_rl.losses.vqa import VQALoss
+from mqa_rl.modules.vqa import CHECKPOINT_NAME, VQAModel, grounding_module, save_vqa, vqa_module
+from mqa_rl.modules.perception import load_perception
+from mqa_rl.modules.vqa_encoder import load_encoder
+from mqa_rl.training.model_checkpoint import ModelCheckpoint
+from mqa_rl.training.run_logger import RunLogger, trim_scalars
+from mqa_rl.training.signals import exit_on_sigterm
+from mqa_rl.training.vqa_data import (DIHEDRAL, Batches, encode_store, load_answering_records,
                                       question_class_labels, scene_split)
 
 # validation metric that picks the kept checkpoint -> its score (higher is better)
