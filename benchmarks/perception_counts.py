@@ -9,13 +9,14 @@ that resample whole scenes; and by the smallest countable target's visible area.
 
 from __future__ import annotations
 
+import mqa_rl  # noqa: F401  (first: sets OMP_WAIT_POLICY before torch loads)
+
 import argparse
 import json
 import time
 
 import torch
 
-import mqa_rl  # noqa: F401  (sets OMP_WAIT_POLICY before torch's threads start)
 from mqa_rl import keys
 from mqa_rl.data import MQADataset
 from mqa_rl.data.dataset import LEVELS

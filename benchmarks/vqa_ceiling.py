@@ -12,13 +12,14 @@ should come close to this, and this close to the calibrated either-frame counter
 
 from __future__ import annotations
 
+import mqa_rl  # noqa: F401  (first: sets OMP_WAIT_POLICY before torch loads)
+
 import argparse
 import time
 from pathlib import Path
 
 import torch
 
-import mqa_rl  # noqa: F401  (sets OMP_WAIT_POLICY before torch's threads start)
 from mqa_rl import keys
 from mqa_rl.collectors.store import load_records
 from mqa_rl.data import MQADataset
