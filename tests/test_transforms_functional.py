@@ -1,17 +1,17 @@
-"""The reward formulas by hand, their degenerate cases, and properties."""
+"""The reward formulas (and the overlap rate χ the env measures) by hand, their degenerate cases, and properties."""
 
 import pytest
 import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from mqa_rl.envs.measurements import overlap_rate
 from mqa_rl.transforms.functional import (
     beta_schedule,
     exploration_reward,
     global_occlusion_reward,
     is_simple_scene,
     local_occlusion_reward,
-    overlap_rate,
 )
 
 T = torch.tensor

@@ -43,12 +43,12 @@ from mqa_rl import keys
 from mqa_rl.data.dataset import MQADataset
 from mqa_rl.data.questions import QUESTION_TYPES
 from mqa_rl.envs import actions
+from mqa_rl.envs.measurements import overlap_rate
 from mqa_rl.sim.geometry import CameraSpec
 from mqa_rl.sim.pusher import FingerPusher, Pusher, PushResult
 from mqa_rl.sim.pushers import make_pusher
 from mqa_rl.sim.scene import BinWorld, build_world
 from mqa_rl.sim.silhouette import SilhouetteProjector
-from mqa_rl.transforms.functional import overlap_rate
 
 MAX_OBJECTS = 50
 

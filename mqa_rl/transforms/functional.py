@@ -15,13 +15,6 @@ EXPLORATION_CAP = 4.0     # the authors' code ignored displacement ratios ≥ 4 
 NOTHING_TO_REVEAL = 1e-6  # overlap below this counts as 0 (a real χ is 0 or ≥ 1 / A_t ≈ 2e-5); keeps ratios finite
 
 
-def overlap_rate(visible_area: torch.Tensor, full_area: torch.Tensor) -> torch.Tensor:
-    """χ = 1 − A_s / A_t, clipped to [0, 1]; an object out of view (A_t = 0) counts as χ = 1."""
-    full = full_area.to(torch.float32)
-    chi = 1.0 - visible_area.to(torch.float32) / full.clamp(min=1e-9)
-    return torch.where(full > 0, chi.clamp(0.0, 1.0), torch.ones_like(chi))
-
-
 def exploration_reward(
     pos_before: torch.Tensor,
     pos_after: torch.Tensor,
