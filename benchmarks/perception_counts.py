@@ -23,7 +23,6 @@ from mqa_rl.data.dataset import LEVELS
 from mqa_rl.envs.sapien_bin import SapienBinEnv
 from mqa_rl.evaluation.episode_metrics import scene_bootstrap_ci95
 from mqa_rl.files import write_atomic
-from mqa_rl.modules import vote_counting
 from mqa_rl.modules.perception import load_perception
 from mqa_rl.transforms.episode_stats import COUNTABLE_PX
 
@@ -65,8 +64,7 @@ def main() -> None:
     counted = {}
     for start in range(0, len(order), 32):
         ids = order[start:start + 32]
-        probs, votes = model.predict(torch.stack([scenes[i][0] for i in ids]))
-        for i, row in zip(ids, vote_counting.counts(probs, votes, model.cell_px)):
+        for i, row in zip(ids, model.counts(torch.stack([scenes[i][0] for i in ids]))):
             counted[i] = row
     perceive_s = time.perf_counter() - t0
     index = {s.id: i for i, s in enumerate(ds.scenes)}
@@ -80,6 +78,7 @@ def main() -> None:
                      float(areas.min()) if len(areas) else float("nan")))
     t = torch.tensor(rows, dtype=torch.float64)
     report = {"perception": a.perception, "dataset": a.dataset, "split": a.split, "step": meta.get("step"),
+              "counting": model.counting,
               "render_s": round(render_s, 1), "perceive_ms_per_image": round(1000 * perceive_s / len(order), 1), "levels": {}}
     print(f"{a.perception} (step {meta.get('step')}) on {a.dataset} {a.split}: {len(order)} first images "
           f"({report['perceive_ms_per_image']} ms each), {len(rows)} COUNTING questions")

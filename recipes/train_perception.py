@@ -6,7 +6,10 @@
     python recipes/train_perception.py device=cuda train.batch_size=128 model.widths=[48,64,128,192]
 
 Selects by the counting rule itself, on whole held-out pretraining scenes: the share of (frame, class
-in the scene) pairs whose vote-cluster count equals the number of objects with ≥ 20 visible pixels.
+in the scene) pairs whose vote-cluster count equals the number of objects with ≥ 20 visible pixels;
+at the end it chooses the counting settings (vote radius, suppression window, probability floor,
+mass threshold) on those scenes too and writes them into the file (``calibrate_only=true``: only
+that, for a run stopped early).
 Writes ``out_dir/perception.pt`` (the best; ``mqa_rl.modules.perception.load_perception``),
 ``checkpoints/`` (atomic, for resume=true), ``csv/`` + ``wandb/`` logs, ``config.yaml``, ``summary.json``.
 """
@@ -14,6 +17,7 @@ Writes ``out_dir/perception.pt`` (the best; ``mqa_rl.modules.perception.load_per
 from __future__ import annotations
 
 import mqa_rl  # noqa: F401  (first: sets OMP_WAIT_POLICY before torch loads)
+import itertools
 import json
 import math
 import time
@@ -32,7 +36,8 @@ from mqa_rl.collectors.store import read_meta
 from mqa_rl.files import write_atomic
 from mqa_rl.losses.perception import PerceptionLoss
 from mqa_rl.modules import vote_counting
-from mqa_rl.modules.perception import CountingPerception, save_perception
+from mqa_rl.data.dataset import LEVELS
+from mqa_rl.modules.perception import CountingPerception, load_perception, save_perception
 from mqa_rl.modules.vqa_encoder import standardise
 from mqa_rl.training.model_checkpoint import ModelCheckpoint
 from mqa_rl.training.resume_guard import RESUMABLE, refuse_changed_config
@@ -42,6 +47,8 @@ from mqa_rl.training.vqa_data import DIHEDRAL, dihedral, scene_split
 from mqa_rl.transforms.episode_stats import COUNTABLE_PX
 
 PERCEPTION_FILE = "perception.pt"
+# the counting settings tried on held-out pretraining scenes (vote_counting.DEFAULT_COUNTING: what they mean)
+CALIBRATION_GRID = {"radius": (2.5, 4.0), "nms": (5, 9), "min_prob": (0.05, 0.3), "min_px": (12, 16, 20, 28, 36)}
 COMMAND = "python recipes/train_perception.py"
 
 
@@ -65,26 +72,60 @@ def true_counts(frames, num_classes: int) -> torch.Tensor:
     return (onehot * countable[..., None]).sum(1)
 
 
-@torch.no_grad()
-def count_accuracy(model: CountingPerception, frames, device, batch_size: int = 64) -> dict[str, float]:
-    """Share of (frame, class present in its scene) pairs counted right, overall and by level."""
-    model.eval()
-    k = model.num_classes
-    truth = true_counts(frames, k)
+def accuracy_table(pred: torch.Tensor, frames) -> dict[str, float]:
+    """Share of (frame, class present in its scene) pairs whose count ``pred`` [N, K-1] is right, overall and by level."""
+    k = pred.shape[1] + 1
     present = torch.nn.functional.one_hot(frames.get(keys.OBJECT_CLASSES), k)[..., 1:].amax(1).bool()
-    preds = []
-    for start in range(0, frames.shape[0], batch_size):
-        probs, votes = model.predict(frames.get(keys.RGB)[start:start + batch_size].to(device))
-        preds.append(vote_counting.counts(probs.float().cpu(), votes.float().cpu(), model.cell_px))
-    model.train()
-    right = (torch.cat(preds) == truth) & present
+    right = (pred == true_counts(frames, k)) & present
     levels = frames.get(keys.LEVEL)
     out = {"val/count_accuracy": (right.sum() / present.sum()).item()}
-    for i, name in enumerate(("easy", "medium", "hard")):
-        m = levels == i
-        if m.any():
-            out[f"val/count_accuracy_{name}"] = (right[m].sum() / present[m].sum()).item()
+    for i, name in enumerate(LEVELS):
+        if (levels == i).any():
+            out[f"val/count_accuracy_{name}"] = (right[levels == i].sum() / present[levels == i].sum()).item()
     return out
+
+
+@torch.no_grad()
+def predictions(model: CountingPerception, frames, device, batch_size: int = 64):
+    """(class probabilities, votes) of every frame, on the CPU."""
+    model.eval()
+    out = [model.predict(frames.get(keys.RGB)[s:s + batch_size].to(device)) for s in range(0, frames.shape[0], batch_size)]
+    model.train()
+    return torch.cat([p.float().cpu() for p, _ in out]), torch.cat([v.float().cpu() for _, v in out])
+
+
+def count_accuracy(model: CountingPerception, frames, device) -> dict[str, float]:
+    """``accuracy_table`` of the model's counts with its own counting settings."""
+    probs, votes = predictions(model, frames, device)
+    return accuracy_table(vote_counting.counts(probs, votes, model.cell_px, **model.counting), frames)
+
+
+def calibrate_counting(model: CountingPerception, frames, device) -> tuple[dict, list[dict]]:
+    """The counting settings (``CALIBRATION_GRID``) under which the model counts the most (frame, class present)
+    pairs of ``frames`` (held-out pretraining scenes) right, and every setting's accuracy."""
+    probs, votes = predictions(model, frames, device)
+    tried = []
+    grid = CALIBRATION_GRID
+    for radius, nms, min_prob in itertools.product(grid["radius"], grid["nms"], grid["min_prob"]):
+        masses = vote_counting.clusters(probs, votes, model.cell_px, radius=radius, nms=nms, min_prob=min_prob)
+        for min_px in grid["min_px"]:
+            setting = {"radius": radius, "nms": nms, "min_prob": min_prob, "min_px": min_px}
+            tried.append({**setting, **accuracy_table(vote_counting.counts_of(masses, min_px), frames)})
+    best = max(tried, key=lambda r: r["val/count_accuracy"])
+    return {k: best[k] for k in vote_counting.DEFAULT_COUNTING}, tried
+
+
+def calibrate_file(path: Path, val, device) -> dict:
+    """Calibrate the counting settings of the perception file at ``path`` on ``val`` and write them into it."""
+    model, meta = load_perception(path)
+    model.to(device)
+    best, tried = calibrate_counting(model, val, device)
+    model.counting = dict(best)
+    after = next(r for r in tried if all(r[k] == best[k] for k in best))
+    save_perception(model, path, {**meta, "counting_calibration": {"chosen": best, "val": after, "tried": tried}})
+    print(f"counting settings chosen on {val.shape[0]} held-out frames: {best} -> val count accuracy "
+          f"{after['val/count_accuracy']:.3f} (before: {meta.get('val', {}).get('val/count_accuracy', float('nan')):.3f})")
+    return after
 
 
 def augment(rgb: torch.Tensor, omap: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -135,13 +176,16 @@ def train(cfg: DictConfig) -> dict:
     print(f"{n_train} training frames, {val.shape[0]} validation frames ({int(val_mask.sum())} held out) "
           f"from {len(cfg.frames.stores)} store(s)", flush=True)
 
+    if cfg.calibrate_only:                    # a run stopped early: choose its counting settings now
+        return calibrate_file(out / PERCEPTION_FILE, val, device)
+
     model = CountingPerception(num_classes, tuple(cfg.model.widths), int(cfg.model.image_size)).to(device)
     loss = PerceptionLoss(model, vote_weight=cfg.train.vote_weight)
     optim = torch.optim.AdamW(model.parameters(), lr=cfg.train.lr, weight_decay=cfg.train.weight_decay)
     steps = int(cfg.train.steps)
     warm = int(cfg.train.warmup_steps)
-    schedule = torch.optim.lr_scheduler.LambdaLR(
-        optim, lambda s: min(1.0, (s + 1) / max(warm, 1)) * 0.5 * (1 + math.cos(math.pi * min(s, steps) / steps)))
+    factor = lambda s: min(1.0, (s + 1) / max(warm, 1)) * 0.5 * (1 + math.cos(math.pi * min(s, steps) / steps))  # noqa: E731
+    schedule = torch.optim.lr_scheduler.LambdaLR(optim, factor)
     state = {"step": 0, "best": -math.inf, "best_step": -1, "train_seconds": 0.0}
     ckpt = ModelCheckpoint(out / "checkpoints", model=model, optimizer=optim, state=state, keep_last=cfg.checkpoint.keep_last)
     if ckpt.latest() is not None:
@@ -151,11 +195,9 @@ def train(cfg: DictConfig) -> dict:
         refuse_changed_config(out / "config.yaml", config, allow=bool(cfg.resume_allow_changes),
                               free=(*RESUMABLE, "train.steps"))      # a longer run stretches the cosine from here
         ckpt.load()
-        schedule.last_epoch = state["step"]
-        schedule.step()
-        schedule.last_epoch = state["step"]
-        for group, lr in zip(optim.param_groups, schedule.get_last_lr()):
-            group["lr"] = lr
+        schedule.last_epoch = state["step"]            # the warm-up and cosine continue from the restored step
+        for group, base in zip(optim.param_groups, schedule.base_lrs):
+            group["lr"] = base * factor(state["step"])
         print(f"resumed at step {state['step']} ({trim_scalars(out / 'csv', state['step'])} log rows after it dropped)")
     elif (out / "config.yaml").exists() or (out / "csv").exists():
         raise FileExistsError(f"{out} holds the logs of a run with no checkpoint (killed before its first one): "
@@ -209,7 +251,9 @@ def train(cfg: DictConfig) -> dict:
     finally:
         bar.close()
         logger.close()
+    calibrated = calibrate_file(out / PERCEPTION_FILE, val, device)
     summary = {"steps": steps, "best_step": state["best_step"], "best_val_count_accuracy": state["best"],
+               "calibrated_val_count_accuracy": calibrated["val/count_accuracy"],
                "train_seconds": round(state["train_seconds"], 1), "train_frames": n_train, "val_frames": int(val.shape[0]),
                "perception": str(out / PERCEPTION_FILE)}
     write_atomic(out / "summary.json", json.dumps(summary, indent=1))

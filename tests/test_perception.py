@@ -164,7 +164,9 @@ def test_frames_perception_and_counting_vqa_recipes_end_to_end(small_dataset, sp
     with pytest.raises(ValueError, match="train.lr"):
         train.train(compose_recipe_config("train_perception", [*targs, "train.steps=4", "resume=true", "train.lr=0.5"]))
     again = train.train(compose_recipe_config("train_perception", [*targs, "train.steps=4", "resume=true"]))
-    assert again["steps"] == 4
+    assert again["steps"] == 4 and 0.0 <= again["calibrated_val_count_accuracy"] <= 1.0
+    chosen = load_perception(out / "perception.pt")[1]["counting_calibration"]["chosen"]
+    assert load_perception(out / "perception.pt")[0].counting == chosen       # the file counts with what was chosen
 
     train_vqa = load_recipe("train_vqa")
     vargs = [*overrides, *quiet, "system=random", "vqa=counting", f"perception.weights={out / 'perception.pt'}",

@@ -28,6 +28,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from mqa_rl.files import load_versioned, save_versioned
+from mqa_rl.modules import vote_counting
 from mqa_rl.modules.vqa_encoder import standardise
 
 PERCEPTION_FORMAT = "mqa_rl.perception"
@@ -47,8 +48,12 @@ class CountingPerception(nn.Module):
     ``widths``: channels at strides 2, 4, 8, 16 (the deepest sees ~100 px of the 112-px input: the
     whole of the largest object). Votes are in output cells, relative to the cell's centre."""
 
-    def __init__(self, num_classes: int, widths=(32, 48, 96, 128), image_size: int = 112):
+    def __init__(self, num_classes: int, widths=(32, 48, 96, 128), image_size: int = 112, counting: dict | None = None):
         super().__init__()
+        unknown = set(counting or {}) - set(vote_counting.DEFAULT_COUNTING)
+        if unknown:
+            raise ValueError(f"unknown counting settings {sorted(unknown)}; known: {sorted(vote_counting.DEFAULT_COUNTING)}")
+        self.counting = {**vote_counting.DEFAULT_COUNTING, **(counting or {})}
         if len(widths) != 4:
             raise ValueError(f"widths must name 4 stages (strides 2, 4, 8, 16), got {list(widths)}")
         if image_size % 16:
@@ -89,8 +94,20 @@ class CountingPerception(nn.Module):
         logits, votes = self(standardise(rgb, self.image_size))
         return logits.softmax(1), votes
 
+    def count_features(self, rgb: torch.Tensor) -> torch.Tensor:
+        """uint8 rgb [B, 3, H, W] → the VQA's per-class count features [B, K, F] (``vote_counting``), with
+        this perception's own counting settings."""
+        probs, votes = self.predict(rgb)
+        return vote_counting.count_features(probs.float().cpu(), votes.float().cpu(), self.cell_px, **self.counting)
+
+    def counts(self, rgb: torch.Tensor) -> torch.Tensor:
+        """uint8 rgb [B, 3, H, W] → int64 [B, K-1]: the objects of each class (1 … K-1) it counts."""
+        probs, votes = self.predict(rgb)
+        return vote_counting.counts(probs.float().cpu(), votes.float().cpu(), self.cell_px, **self.counting)
+
     def config(self) -> dict:
-        return {"num_classes": self.num_classes, "widths": list(self.widths), "image_size": self.image_size}
+        return {"num_classes": self.num_classes, "widths": list(self.widths), "image_size": self.image_size,
+                "counting": dict(self.counting)}
 
 
 def save_perception(model: CountingPerception, path: str | Path, meta: dict) -> Path:

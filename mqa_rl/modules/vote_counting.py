@@ -26,10 +26,16 @@ MAX_COUNT = 6              # count one-hot bins 0 … 6 (6 = six or more)
 TOP = 6                    # largest cluster masses kept per class
 FEATURES = (MAX_COUNT + 1) + TOP + 1          # per class: count one-hot, top masses, area
 PEAK_FLOOR = 4.0           # a peak needs this much smoothed vote mass (px) to be a candidate at all
-MIN_PROB = 0.05            # cells below this class probability do not vote for it
+# How clusters are formed and counted; a perception file carries its own, chosen on held-out pretraining
+# scenes (recipes/train_perception.py calibrates them): radius (cells) within which a vote joins a peak,
+# the non-maximum suppression window (cells), the class probability below which a cell does not vote,
+# and the cluster mass (px) from which an object counts (the rule's 20 px, or what the predicted masses
+# need to meet it).
+DEFAULT_COUNTING = {"radius": 2.5, "nms": 5, "min_prob": 0.05, "min_px": COUNTABLE_PX}
 
 
-def clusters(probs: torch.Tensor, votes: torch.Tensor, cell_px: float, *, radius: float = 2.5, nms: int = 5):
+def clusters(probs: torch.Tensor, votes: torch.Tensor, cell_px: float, *, radius: float = 2.5, nms: int = 5,
+             min_prob: float = 0.05):
     """Per image and class the masses (224-px) of its vote clusters.
 
     probs [B, K, s, s] (class 0 = background is skipped), votes [B, 2, s, s] (dy, dx in cells).
@@ -42,10 +48,10 @@ def clusters(probs: torch.Tensor, votes: torch.Tensor, cell_px: float, *, radius
         tx = (xs + votes[i, 1]).clamp(0, s - 1)
         cell = (ty.round() * s + tx.round()).long().flatten()                    # [s*s] where each cell votes
         mass = probs[i, 1:].flatten(1) * cell_px                                  # [K-1, s*s]
-        mass = mass * (probs[i, 1:].flatten(1) >= MIN_PROB)
+        mass = mass * (probs[i, 1:].flatten(1) >= min_prob)
         hist = torch.zeros(k - 1, s * s, dtype=probs.dtype).index_add_(1, cell, mass).view(k - 1, 1, s, s)
         smooth = F.avg_pool2d(hist, 3, 1, 1, count_include_pad=False) * 9
-        peaks = (smooth == F.max_pool2d(smooth, nms, 1, nms // 2)) & (smooth >= PEAK_FLOOR)
+        peaks = (smooth == F.max_pool2d(smooth, int(nms), 1, int(nms) // 2)) & (smooth >= PEAK_FLOOR)
         per_class = []
         vote_pos = torch.stack([ty.flatten(), tx.flatten()], -1)                  # [s*s, 2]
         for c in range(k - 1):
@@ -64,8 +70,12 @@ def clusters(probs: torch.Tensor, votes: torch.Tensor, cell_px: float, *, radius
 
 def counts(probs: torch.Tensor, votes: torch.Tensor, cell_px: float, min_px: float = COUNTABLE_PX, **kwargs) -> torch.Tensor:
     """int64 [B, K-1]: objects of each class (classes 1 … K-1) whose cluster holds ≥ ``min_px`` visible px."""
-    return torch.tensor([[int((m >= min_px).sum()) for m in per_class]
-                         for per_class in clusters(probs, votes, cell_px, **kwargs)], dtype=torch.int64)
+    return counts_of(clusters(probs, votes, cell_px, **kwargs), min_px)
+
+
+def counts_of(masses, min_px: float = COUNTABLE_PX) -> torch.Tensor:
+    """int64 [B, K-1] from ``clusters``' masses: the clusters of each class holding ≥ ``min_px``."""
+    return torch.tensor([[int((m >= min_px).sum()) for m in per_class] for per_class in masses], dtype=torch.int64)
 
 
 def count_features(probs: torch.Tensor, votes: torch.Tensor, cell_px: float, min_px: float = COUNTABLE_PX,

@@ -219,8 +219,7 @@ class VQAModel(nn.Module):
         and object densities [..., 2K, 24, 24]."""
         batch = rgb.shape[:-3]
         if self.pool == "counts":
-            probs, votes = self.encoder.predict(rgb.reshape(-1, *rgb.shape[-3:]))
-            out = vote_counting.count_features(probs.float().cpu(), votes.float().cpu(), self.encoder.cell_px).to(rgb.device)
+            out = self.encoder.count_features(rgb.reshape(-1, *rgb.shape[-3:])).to(rgb.device)
             return out.reshape(*batch, *out.shape[1:])
         if self.pool != "classes":
             return self.encoder.encode(rgb)
