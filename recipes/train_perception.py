@@ -193,7 +193,7 @@ def train(cfg: DictConfig) -> dict:
             raise FileExistsError(f"{out} already holds checkpoints ({ckpt.latest().name}): pass resume=true to continue "
                                   f"that run, or choose another out_dir")
         refuse_changed_config(out / "config.yaml", config, allow=bool(cfg.resume_allow_changes),
-                              free=(*RESUMABLE, "train.steps"))      # a longer run stretches the cosine from here
+                              free=(*RESUMABLE, "train.steps", "calibrate_only"))   # a longer run stretches the cosine from here
         ckpt.load()
         schedule.last_epoch = state["step"]            # the warm-up and cosine continue from the restored step
         for group, base in zip(optim.param_groups, schedule.base_lrs):

@@ -15,7 +15,9 @@ log() { printf '[bootstrap] %s\n' "$*" >&2; }
 
 # --- 1. virtualenv + packages ------------------------------------------------------------
 stamp="$VENV/.mqa-lock-stamp"
-want="$(sha256sum "$LOCK" "$ROOT/pyproject.toml" | sha256sum | cut -d' ' -f1)"
+# the files' contents, not their paths: a venv shared by two checkouts (MQA_VENV) is not rebuilt, nor its
+# editable install moved from one checkout to the other under running jobs (PYTHONPATH below picks the code)
+want="$(cat "$LOCK" "$ROOT/pyproject.toml" | sha256sum | cut -d' ' -f1)"
 if [ ! -x "$VENV/bin/python" ]; then
     log "creating virtualenv $VENV"
     "$PY" -m venv "$VENV"
@@ -86,4 +88,5 @@ else
     log "Vulkan (lavapipe) ready"
 fi
 export PATH="$VENV/bin:$PATH"
+export PYTHONPATH="$ROOT${PYTHONPATH:+:$PYTHONPATH}"      # this checkout's mqa_rl, whichever the venv's editable install names
 export VIRTUAL_ENV="$VENV"
