@@ -14,6 +14,7 @@ import mqa_rl  # noqa: F401  (first: sets OMP_WAIT_POLICY before torch loads)
 import argparse
 import json
 import time
+from pathlib import Path
 
 import torch
 
@@ -105,7 +106,7 @@ def main() -> None:
     print("  by the smallest countable target's visible px: " + ", ".join(
         f"{k}: {v['count_equals_visible']:.3f} (n={v['questions']})" for k, v in bins.items()))
     if a.json:
-        write_atomic(a.json, json.dumps(report, indent=1))
+        write_atomic(Path(a.json), json.dumps(report, indent=1))
 
 
 if __name__ == "__main__":
