@@ -177,3 +177,25 @@ def test_frames_perception_and_counting_vqa_recipes_end_to_end(small_dataset, sp
     q = small_dataset.questions[0]
     img = torch.zeros(1, 224, 224, 3, dtype=torch.uint8)
     assert model.answer_probs(model.tokenize([q.text]), img, img).shape == (1, len(small_dataset.answers))
+
+
+@pytest.mark.parametrize("system", ["no_manipulation", "privileged"])
+def test_the_shipped_counting_vqas_load_with_their_provenance_and_answer(system, small_dataset):
+    """checkpoints/vqa_counting: the perception and each system's head load, match the hashes their
+    provenance records, count with the calibrated settings, and answer through the public contract."""
+    import hashlib
+    import json
+    from pathlib import Path
+
+    folder = Path(__file__).parents[1] / "checkpoints" / "vqa_counting"
+    provenance = json.loads((folder / system / "provenance.json").read_text())
+    assert hashlib.sha256((folder / system / "vqa.pt").read_bytes()).hexdigest() == provenance["vqa_sha256"]
+    perception, meta = load_perception(folder / "perception.pt")
+    assert perception.counting == meta["counting_calibration"]["chosen"]
+    model = load_vqa(folder / system)
+    assert model.pool == "counts" and model.meta["system"] == system and model.answers == list(small_dataset.answers)
+    for name, weight in perception.state_dict().items():       # the head's frozen copy is the shipped perception
+        assert torch.equal(model.encoder.state_dict()[name], weight)
+    frame = torch.full((1, 224, 224, 3), 128, dtype=torch.uint8)
+    probs = model.answer_probs(model.tokenize(["How many cans are there in the bin?"]), frame, frame)
+    assert probs.shape == (1, len(model.answers)) and torch.allclose(probs.sum(-1), torch.ones(1))
