@@ -19,6 +19,7 @@ from pathlib import Path
 import torch
 
 from mqa_rl import keys
+from mqa_rl.collectors.perception_frames import scene_questions
 from mqa_rl.data import MQADataset
 from mqa_rl.data.dataset import LEVELS
 from mqa_rl.envs.sapien_bin import SapienBinEnv
@@ -33,12 +34,12 @@ AREA_BINS = ((20, 100), (100, 500), (500, float("inf")))
 def first_images(ds: MQADataset, split: str):
     """{scene index: (rgb uint8 [3, H, W], visible px [n], class per object [n])} of the split's rest piles."""
     env = SapienBinEnv(ds, split=None)
+    first = scene_questions(ds)
     out = {}
     for i, scene in enumerate(ds.scenes):
         if scene.split != split:
             continue
-        question = next(q for q in ds.questions if q.scene_id == scene.id)
-        td = env.reset(question_id=question.id)
+        td = env.reset(question_id=first[scene.id])
         n = len(scene.objects)
         out[i] = (td[keys.RGB], td[keys.VISIBLE_AREA][:n].clone(),
                   torch.tensor([1 + ds.classes.index(o.class_name) for o in scene.objects]))

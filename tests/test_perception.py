@@ -4,9 +4,11 @@ from types import SimpleNamespace
 
 import pytest
 import torch
+from tensordict import TensorDict
 
 from mqa_rl import keys
 from mqa_rl.collectors.perception_frames import check_disjoint, scene_fingerprint
+from mqa_rl.collectors.store import load_records
 from mqa_rl.losses.perception import PerceptionLoss, perception_targets
 from mqa_rl.modules import vote_counting
 from mqa_rl.modules.perception import CountingPerception, load_perception, save_perception
@@ -63,8 +65,8 @@ def test_perception_learns_a_few_frames():
     rgb = torch.zeros(2, 3, 112, 112)
     rgb[:, 0] = omap.float() / 5.0 - 0.5          # each object its own shade of red
     rgb[:, 1] = (torch.tensor([0, 3, 3, 5, 7, 3])[omap.long()].float() / 7.0) - 0.5
-    batch = __import__("tensordict").TensorDict({keys.OBJECT_MAP: omap.expand(2, -1, -1),
-                                                 keys.OBJECT_CLASSES: classes.expand(2, -1)}, batch_size=[2])
+    batch = TensorDict({keys.OBJECT_MAP: omap.expand(2, -1, -1), keys.OBJECT_CLASSES: classes.expand(2, -1)},
+                       batch_size=[2])
     optim = torch.optim.Adam(model.parameters(), lr=3e-3)
     first = None
     for _ in range(60):
@@ -140,7 +142,7 @@ def test_frames_perception_and_counting_vqa_recipes_end_to_end(small_dataset, sp
     args = [f"dataset={small_dataset.root}", f"out_dir={frames}", "episodes_per_scene=1", "pushes=1", "workers=1",
             "chunk_episodes=2", f"protected=[{{dataset: {sparse_dataset.root}, split: null}}]"]
     collect.main.__wrapped__(compose_recipe_config("collect_frames", args))
-    records = __import__("mqa_rl.collectors.store", fromlist=["load_records"]).load_records(frames)
+    records = load_records(frames)
     n = len(small_dataset.scenes)
     assert records.shape[0] == 2 * n and records.get(keys.RGB).shape[-1] == 112
     assert records.get(keys.PUSHES).tolist() == [0, 1] * n

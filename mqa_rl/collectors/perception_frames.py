@@ -33,7 +33,7 @@ from tqdm import tqdm
 
 from mqa_rl import keys
 from mqa_rl.collectors.rollouts import episode_seed, object_map
-from mqa_rl.collectors.store import EpisodeStore, load_records
+from mqa_rl.collectors.store import SCENE_OFFSET, EpisodeStore, load_records
 from mqa_rl.data.dataset import LEVELS, MQADataset, dataset_fingerprint
 from mqa_rl.envs import actions
 from mqa_rl.envs.sapien_bin import MAX_OBJECTS, SapienBinEnv
@@ -73,13 +73,22 @@ def _frame(env: SapienBinEnv, td, size: int) -> dict:
             keys.FRAME_VISIBLE: td[keys.VISIBLE_AREA].clone(), keys.PUSHES: torch.tensor(int(td[keys.PUSH_COUNT]))}
 
 
-def pile_episode(env: SapienBinEnv, scene_index: int, *, pushes: int, size: int, seed: int, slot: int) -> TensorDict:
-    """Frames [pushes + 1] of one pile episode on the dataset's scene ``scene_index`` (see the module docstring)."""
+def scene_questions(ds: MQADataset) -> dict[str, str]:
+    """{scene id: the id of one of its questions}: what ``env.reset`` takes to rebuild that scene."""
+    out: dict[str, str] = {}
+    for q in ds.questions:
+        out.setdefault(q.scene_id, q.id)
+    return out
+
+
+def pile_episode(env: SapienBinEnv, scene_index: int, question_id: str, *, pushes: int, size: int, seed: int,
+                 slot: int) -> TensorDict:
+    """Frames [pushes + 1] of one pile episode on the dataset's scene ``scene_index`` (reset through one of its
+    questions, ``question_id``; see the module docstring)."""
     ds = env.dataset
     scene = ds.scenes[scene_index]
     rng = torch.Generator().manual_seed(episode_seed(seed, slot))
-    question = next(q for q in ds.questions if q.scene_id == scene.id)
-    td = env.reset(question_id=question.id)
+    td = env.reset(question_id=question_id)
     frames = [_frame(env, td, size)]
     for _ in range(pushes):
         allowed = td[keys.ACTION_MASK][: actions.NUM_PUSHES].float()
@@ -104,9 +113,9 @@ def _init(root: str, run: dict) -> None:
     _WORKER.update(env=SapienBinEnv(root, split=None, max_pushes=max(1, run["pushes"])), run=run)
 
 
-def _task(task: tuple[int, int]) -> dict:
-    slot, scene_index = task
-    return pile_episode(_WORKER["env"], scene_index, slot=slot, **_WORKER["run"]).numpy()
+def _task(task: tuple[int, int, str]) -> dict:
+    slot, scene_index, question_id = task
+    return pile_episode(_WORKER["env"], scene_index, question_id, slot=slot, **_WORKER["run"]).numpy()
 
 
 def collect_perception_frames(out_dir, dataset, *, episodes_per_scene: int, pushes: int, size: int = 112,
@@ -118,7 +127,8 @@ def collect_perception_frames(out_dir, dataset, *, episodes_per_scene: int, push
                          f"{pushes}, {chunk_episodes}")
     ds = dataset if isinstance(dataset, MQADataset) else MQADataset(dataset)
     check_disjoint(ds, protected)
-    tasks = [(e * len(ds.scenes) + s, s) for e in range(episodes_per_scene) for s in range(len(ds.scenes))]
+    first = scene_questions(ds)
+    tasks = [(e * len(ds.scenes) + s, s, first[scene.id]) for e in range(episodes_per_scene) for s, scene in enumerate(ds.scenes)]
     run = {"pushes": int(pushes), "size": int(size), "seed": int(seed)}
     meta = {"schema": SCHEMA, "kind": "perception_frames",
             "dataset": {"root": str(ds.root), "manifest_sha256": dataset_fingerprint(ds.root)},
@@ -167,7 +177,7 @@ def load_frames(stores, select=None) -> TensorDict:
         td = load_records(store, select, require_complete=False)
         if td.shape[0] == 0:
             raise ValueError(f"{store} holds no frames yet: run recipes/collect_frames.py")
-        td.set(keys.SCENE, td.get(keys.SCENE) + i * 1_000_000)
+        td.set(keys.SCENE, td.get(keys.SCENE) + i * SCENE_OFFSET)
         parts.append(td)
     return torch.cat(parts)
 

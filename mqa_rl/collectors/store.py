@@ -31,6 +31,7 @@ from mqa_rl import keys
 from mqa_rl.files import write_atomic
 
 META = "meta.json"
+SCENE_OFFSET = 1_000_000      # records of several stores (datasets) read together: scene ids + k · SCENE_OFFSET
 CHUNK_PREFIX = "chunk-"
 
 

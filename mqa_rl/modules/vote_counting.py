@@ -38,8 +38,8 @@ PEAK_FLOOR = 4.0           # a peak needs this much smoothed vote mass (px) to b
 DEFAULT_COUNTING = {"radius": 2.5, "nms": 5, "min_prob": 0.05, "min_px": COUNTABLE_PX}
 
 
-def clusters(probs: torch.Tensor, votes: torch.Tensor, cell_px: float, *, radius: float = 2.5, nms: int = 5,
-             min_prob: float = 0.05):
+def clusters(probs: torch.Tensor, votes: torch.Tensor, cell_px: float, *, radius: float = DEFAULT_COUNTING["radius"],
+             nms: int = DEFAULT_COUNTING["nms"], min_prob: float = DEFAULT_COUNTING["min_prob"]):
     """Per image and class the masses (224-px) of its vote clusters.
 
     probs [B, K, s, s] (class 0 = background is skipped), votes [B, 2, s, s] (dy, dx in cells).

@@ -32,6 +32,12 @@ Frame vector (``pool``):
   looks like. What the frozen encoder computes (``encode_frames``, cached in training) is then
   [2·21, 24, 24] instead of the bottleneck [32, 10, 10].
 
+* ``"counts"`` (ours, ``vqa=counting``): the encoder is the counting perception
+  (``mqa_rl.modules.perception``, frozen), which reads per class how many objects show ≥ 20 px, its
+  largest vote clusters and its area (``vote_counting.count_features``); the question picks the class
+  (heads over the class channels, grounded) and an MLP reads what it picked plus how crowded the image
+  is (docs/perception.md).
+
 Public contract (the web demo and ``recipes/evaluate.py`` use only this)::
 
     from mqa_rl.modules.vqa import load_vqa
@@ -97,22 +103,30 @@ class QuestionCellPool(nn.Module):
         return self.out(self.norm(torch.cat([pooled, area], -1).flatten(1)))
 
 
-class QuestionClassPool(nn.Module):
-    """Question-selected class maps (``pool="classes"``): [N, 2K, h, w] (class log-probabilities, then
-    per-class object densities; ``FrameEncoder.class_maps``), q [N, D] → [N, D]."""
+class _ClassChoice(nn.Module):
+    """The question's choice of class (``heads`` softmaxes over the K class channels) shared by the
+    question-selected pools; what the grounding loss supervises."""
 
-    def __init__(self, num_classes: int, dim: int, heads: int, dropout: float, width: int = 16):
+    def __init__(self, num_classes: int, dim: int, heads: int):
         super().__init__()
         self.select = nn.Linear(dim, heads * num_classes)
         self.heads = heads
-        self.conv = nn.Sequential(nn.Conv2d(2 * heads, width, 3, padding=1), nn.ReLU(inplace=True),
-                                  nn.Conv2d(width, width, 3, padding=1), nn.ReLU(inplace=True))
-        self.norm = nn.LayerNorm(2 * width + 2 * heads)
-        self.out = nn.Sequential(nn.Linear(2 * width + 2 * heads, dim), nn.ReLU(inplace=True), nn.Dropout(dropout))
 
     def choice_logits(self, q: torch.Tensor) -> torch.Tensor:
         """[N, H, K]: which class each head picks, before the softmax (what the grounding loss supervises)."""
         return self.select(q).view(q.shape[0], self.heads, -1)
+
+
+class QuestionClassPool(_ClassChoice):
+    """Question-selected class maps (``pool="classes"``): [N, 2K, h, w] (class log-probabilities, then
+    per-class object densities; ``FrameEncoder.class_maps``), q [N, D] → [N, D]."""
+
+    def __init__(self, num_classes: int, dim: int, heads: int, dropout: float, width: int = 16):
+        super().__init__(num_classes, dim, heads)
+        self.conv = nn.Sequential(nn.Conv2d(2 * heads, width, 3, padding=1), nn.ReLU(inplace=True),
+                                  nn.Conv2d(width, width, 3, padding=1), nn.ReLU(inplace=True))
+        self.norm = nn.LayerNorm(2 * width + 2 * heads)
+        self.out = nn.Sequential(nn.Linear(2 * width + 2 * heads, dim), nn.ReLU(inplace=True), nn.Dropout(dropout))
 
     def forward(self, maps: torch.Tensor, q: torch.Tensor) -> torch.Tensor:
         maps = maps.float()
@@ -127,21 +141,15 @@ class QuestionClassPool(nn.Module):
         return self.out(self.norm(torch.cat([c.flatten(2).mean(-1), c.flatten(2).amax(-1), sums], -1)))
 
 
-class QuestionCountPool(nn.Module):
+class QuestionCountPool(_ClassChoice):
     """Question-selected counts (``pool="counts"``): per-class count features [N, K, F] of the counting
     perception (``vote_counting.count_features``; row 0 the image-wide entry, row c the class c), q [N, D]
     → [N, D]. The question picks classes (``heads`` softmaxes over them, supervised by the grounding
     loss); what each head picked and the image-wide entry go through one MLP."""
 
     def __init__(self, num_classes: int, features: int, dim: int, heads: int, dropout: float):
-        super().__init__()
-        self.select = nn.Linear(dim, heads * num_classes)
-        self.heads = heads
+        super().__init__(num_classes, dim, heads)
         self.out = nn.Sequential(nn.Linear((heads + 1) * features, dim), nn.ReLU(inplace=True), nn.Dropout(dropout))
-
-    def choice_logits(self, q: torch.Tensor) -> torch.Tensor:
-        """[N, H, K]: which class each head picks, before the softmax (what the grounding loss supervises)."""
-        return self.select(q).view(q.shape[0], self.heads, -1)
 
     def forward(self, feats: torch.Tensor, q: torch.Tensor) -> torch.Tensor:
         feats = feats.float()
@@ -215,8 +223,8 @@ class VQAModel(nn.Module):
     # ------------------------------------------------------------------------------------ forward
     def encode_frames(self, rgb: torch.Tensor) -> torch.Tensor:
         """uint8 rgb [..., 3, H, W] → what the image part of the model reads (and a frozen encoder's cache
-        holds): the bottleneck [..., 32, 10, 10], or for ``pool="classes"`` the class log-probabilities
-        and object densities [..., 2K, 24, 24]."""
+        holds): the bottleneck [..., 32, 10, 10], for ``pool="classes"`` the class log-probabilities
+        and object densities [..., 2K, 24, 24], for ``pool="counts"`` the perception's count features [..., K, F]."""
         batch = rgb.shape[:-3]
         if self.pool == "counts":
             out = self.encoder.count_features(rgb.reshape(-1, *rgb.shape[-3:])).to(rgb.device)

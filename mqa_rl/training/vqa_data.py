@@ -22,7 +22,7 @@ import torch
 from tensordict import TensorDict
 
 from mqa_rl import keys
-from mqa_rl.collectors.store import chunk_paths, load_records, read_meta
+from mqa_rl.collectors.store import SCENE_OFFSET, chunk_paths, load_records, read_meta
 from mqa_rl.data import MQADataset
 from mqa_rl.data.dataset import dataset_fingerprint
 
@@ -140,7 +140,6 @@ class Batches:
             yield self.take(torch.arange(start, min(start + batch_size, len(self))))
 
 
-SCENE_OFFSET = 1_000_000      # pretraining frames of a store on another dataset: scene ids + k · SCENE_OFFSET
 
 
 def store_dataset(store: str | Path, dataset, loaded: dict | None = None):
