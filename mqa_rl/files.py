@@ -5,7 +5,7 @@ nothing else from mqa_rl).
 mid-write) never sees half a file. ``save_versioned`` / ``load_versioned``: a dict tagged with its
 format and version, written atomically, read with errors that say what to do (missing, unreadable or
 truncated, foreign, newer than this mqa_rl); used by the push recognition file, the stop critic and
-the perception. Training checkpoints use ``torchrl.checkpoint`` (``mqa_rl.training.checkpoint``).
+the perception. Training checkpoints use ``torchrl.checkpoint`` (``mqa_rl.verified_checkpoint``).
 
 Importing this module does not import torch (the report writers use ``write_atomic``).
 """

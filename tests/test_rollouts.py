@@ -112,7 +112,7 @@ def _fake_dqn_run(run, env):
     from torchrl.checkpoint import Checkpoint, CheckpointRotation
 
     from mqa_rl.modules.push_policy import make_push_qnet, make_q_actor
-    from mqa_rl.training.checkpoint import INTEGRITY, IntegrityAdapter
+    from mqa_rl.verified_checkpoint import INTEGRITY, IntegrityAdapter
 
     model = OmegaConf.load(Path(__file__).parents[1] / "recipes" / "conf" / "trunk" / "light.yaml")
     cfg = OmegaConf.create({"model": model, "action_mask": True})

@@ -39,8 +39,8 @@ from mqa_rl.modules.push_policy import make_explorer
 from mqa_rl.modules.q_override import best_allowed_push, take_action
 from mqa_rl.modules.trained_policy import load_greedy
 from mqa_rl.modules.random_policy import RandomMQAPolicy
-from mqa_rl.training.checkpoint import newest_checkpoint
 from mqa_rl.transforms.push_memory import memory_radius
+from mqa_rl.verified_checkpoint import newest_checkpoint
 
 KINDS = ("random", "random_masked", "none", "dqn", "privileged")
 PRIVILEGED_OPTIONS = ("min_visible_px", "min_visible_fraction", "max_tries_per_occluder", "lookahead", "order",

@@ -15,7 +15,7 @@ from torchrl.checkpoint import Checkpoint, CheckpointRotation
 
 from mqa_rl import keys
 from mqa_rl.modules.push_policy import make_push_qnet, make_q_actor
-from mqa_rl.training.checkpoint import CheckpointCorrupt, IntegrityAdapter, newest_checkpoint
+from mqa_rl.verified_checkpoint import CheckpointCorrupt, IntegrityAdapter, newest_checkpoint
 
 
 def run_checkpoints(run: str | Path) -> list[Path]:

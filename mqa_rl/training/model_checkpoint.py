@@ -14,7 +14,7 @@ from torch import nn
 from torch.optim import Optimizer
 from torchrl.checkpoint import Checkpoint, CheckpointRotation, GlobalRNGState
 
-from mqa_rl.training.checkpoint import INTEGRITY, CheckpointCorrupt, IntegrityAdapter, newest_checkpoint, restore_verified
+from mqa_rl.verified_checkpoint import INTEGRITY, CheckpointCorrupt, IntegrityAdapter, newest_checkpoint, restore_verified
 
 
 class ModelCheckpoint:

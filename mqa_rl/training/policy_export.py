@@ -16,7 +16,7 @@ from pathlib import Path
 
 from torchrl.checkpoint import Checkpoint, CheckpointRotation
 
-from mqa_rl.training.checkpoint import INTEGRITY, IntegrityAdapter
+from mqa_rl.verified_checkpoint import INTEGRITY, IntegrityAdapter
 
 
 def export_policy(actor, run: str | Path, out_dir: str | Path, *, step: int, provenance: dict,
