@@ -44,7 +44,7 @@ VOCAB, QLEN, SIZE = 120, 14, 224
 CONF = Path(__file__).parents[1] / "recipes" / "conf" / "trunk"
 MODELS = {p.stem: dict(OmegaConf.to_container(OmegaConf.load(p))) for p in sorted(CONF.glob("*.yaml"))}   # the recipe's
 MODELS["light_full_res"] = {**MODELS["light"], "light_downsample": 1}                                     # for comparison
-MODELS["light_recognition"] = {**MODELS["light"], "class_map": True}        # profile=cpu_recognition: rgb trunk frozen
+MODELS["light_recognition"] = {**MODELS["light"], "class_map": True}        # the students' recognition: rgb trunk frozen
 MODELS["light_rotated"] = {**MODELS["light_recognition"], "rotated_head": True, "head_channels": [16, 16]}  # one head, 8 turns
 
 

@@ -1,7 +1,7 @@
 """Collect the privileged oracle's demonstrations on the train split, for DQN from demonstrations.
 
     python recipes/collect_demonstrations.py                     # 2,000 states -> runs/demos
-    python recipes/train_dqn.py profile=cpu_recognition demos.path=runs/demos ...
+    python recipes/train_dqn.py profile=student demos.path=runs/demos ...
     python recipes/collect_demonstrations.py learner.run=runs/teacher_global out_dir=runs/demos_dagger  # DAgger
 
 The oracle reads the simulator (which target is hidden, which object covers it); the states it meets
@@ -29,7 +29,7 @@ from mqa_rl.collectors.demonstrations import DEMOS_META, collect_demonstrations
 from mqa_rl.data.dataset import dataset_fingerprint
 from mqa_rl.envs import actions
 from mqa_rl.envs.sapien_bin import SapienBinEnv
-from mqa_rl.modules.frozen_policies import StopMargin
+from mqa_rl.modules.stop_margin import StopMargin
 from mqa_rl.modules.trained_policy import load_greedy
 
 def collect(cfg: DictConfig) -> dict:

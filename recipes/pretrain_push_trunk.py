@@ -6,8 +6,8 @@ nothing about where targets are in 1,400 updates (docs/results.md, "The paper's 
 class head learn the class fractions of every action-grid cell from the simulator's segmentation
 (``SapienBinEnv.class_cells``) on train-split renders; then the question encoder and its attention
 over the classes learn which class each train-split question asks about (from the dataset's questions,
-no images). ``train_dqn.py profile=cpu_recognition`` (``model.class_map=true model.pretrained=<out_dir>/
-recognition.pt``) starts from them, the visual part frozen by default.
+no images). ``train_dqn.py model.class_map=true model.pretrained=<out_dir>/recognition.pt`` (the ``student`` profile:
+the shipped ``checkpoints/recognition/recognition.pt``) starts from them, the visual part frozen by default.
 
     python recipes/pretrain_push_trunk.py                         # 4,000 frames, 4,000 steps (~15 min on 2 cores)
     python recipes/pretrain_push_trunk.py frames.count=300 train.steps=50 out_dir=runs/tiny

@@ -45,7 +45,7 @@ from mqa_rl.losses.target_map import TargetMapLoss
 from mqa_rl.modules.pretrained_recognition import load_recognition
 from mqa_rl.modules.push_policy import make_explorer, make_push_qnet, make_q_actor
 from mqa_rl.training.checkpoint import TrainingCheckpoint
-from mqa_rl.training.resume_guard import refuse_changed_config
+from mqa_rl.training.resume_guard import RESUMABLE, refuse_changed_config
 from mqa_rl.training.run_logger import RunLogger, trim_scalars
 from mqa_rl.training.signals import exit_on_sigterm
 
@@ -73,6 +73,14 @@ def check_config(cfg: DictConfig) -> None:
     if not Path(cfg.dataset).exists():
         raise FileNotFoundError(f"dataset {cfg.dataset} does not exist: make it with recipes/make_dataset.py "
                                 f"or point dataset=... at one")
+
+
+def resumable(saved_config: Path, config: dict) -> tuple[str, ...]:
+    """The settings a resume may change: ``RESUMABLE``, and the demonstrations' settings when neither the saved run
+    nor ``config`` learns from demonstrations (unread then: a changed default of theirs changes no experiment)."""
+    saved = OmegaConf.load(saved_config) if saved_config.exists() else {}
+    no_demos = not (saved.get("demos") or {}).get("path") and not (config.get("demos") or {}).get("path")
+    return RESUMABLE + ("demos.",) if no_demos else RESUMABLE
 
 
 DEMO_METRICS = ("loss_demo", "demo_agreement", "demo_near", "demo_stop_agreement")
@@ -218,8 +226,9 @@ def train(cfg: DictConfig) -> dict:
         if not cfg.resume:
             raise FileExistsError(f"{out} already holds checkpoints ({ckpt.latest().name}): pass resume=true to "
                                   f"continue that run, or choose another out_dir")
-        refuse_changed_config(out / "config.yaml", OmegaConf.to_container(cfg, resolve=True),
-                              cfg.get("resume_allow_changes", False))
+        config = OmegaConf.to_container(cfg, resolve=True)
+        refuse_changed_config(out / "config.yaml", config, cfg.get("resume_allow_changes", False),
+                              resumable(out / "config.yaml", config))
         path = ckpt.load()
         state.setdefault("demo_pretrain_updates", 0)       # checkpoints older than the pre-training counters
         state.setdefault("demo_pretrain_seconds", 0.0)

@@ -1,5 +1,5 @@
-"""The 30-minute student (profile=cpu_quick_student, tools/train_student.sh) starts from the shipped
-recognition file: the profile must build a network that file fits, frozen, with the budget it promises."""
+"""The students' profiles: `student` (tools/train_student.sh) starts from the shipped recognition file, frozen,
+with the budget it promises; `shipped_student` rebuilds the network of checkpoints/dqn_geometric_student."""
 
 import json
 import os
@@ -8,17 +8,22 @@ from pathlib import Path
 
 import torch
 
+from omegaconf import OmegaConf
+from torchrl.checkpoint import Checkpoint
+from torchrl.data import Categorical
+
 from conftest import compose_recipe_config
 from mqa_rl.data.objects import CLASS_NAMES
 from mqa_rl.modules.pretrained_recognition import load_recognition
-from mqa_rl.modules.push_policy import make_push_qnet
+from mqa_rl.modules.push_policy import make_push_qnet, make_q_actor
+from mqa_rl.training.resume_guard import flatten
 from mqa_rl.sim.geometry import CAMERA_DISTANCE
 
 REPO = Path(__file__).parents[1]
 
 
-def test_the_quick_student_profile_loads_the_shipped_recognition_frozen():
-    cfg = compose_recipe_config("train_dqn", ["profile=cpu_quick_student"])
+def test_the_student_profile_loads_the_shipped_recognition_frozen():
+    cfg = compose_recipe_config("train_dqn", ["profile=student"])
     assert cfg.demos.pretrain_updates == 2500 and cfg.collector.total_frames == 8
     assert cfg.env.push_memory == 1            # the stop fit and the test run the policy with the memory
     assert cfg.model.geometric_push and cfg.model.rotated_head and cfg.model.class_map
@@ -34,6 +39,24 @@ def test_the_quick_student_profile_loads_the_shipped_recognition_frozen():
     assert not any(p.requires_grad for p in net.class_head.parameters())
     assert all(p.requires_grad for p in net.question.parameters())
 
+
+def test_the_shipped_student_profile_composes_the_shipped_students_config_and_loads_its_weights():
+    """The provenance's command under the profile's new name gives the settings the shipped student was trained
+    with; its recognition file is the shipped copy of the same weights (the old path was runs/recognition/)."""
+    shipped = flatten(OmegaConf.to_container(OmegaConf.load(REPO / "checkpoints/dqn_geometric_student/config.yaml")))
+    cfg = compose_recipe_config("train_dqn", ["dataset=data/mqa", "reward=global", "profile=shipped_student",
+                                              "out_dir=runs/geometric_student"])
+    composed = flatten(OmegaConf.to_container(cfg, resolve=False))
+    differ = {k: (shipped[k], composed[k]) for k in shipped.keys() & composed.keys() if shipped[k] != composed[k]}
+    assert differ == {"model.pretrained": ("runs/recognition/recognition.pt", "checkpoints/recognition/recognition.pt"),
+                      "logger.progress": (False, True)}
+    vocab = torch.load(REPO / cfg.model.pretrained, map_location="cpu", weights_only=False)["question"]["embedding.weight"].shape[0]
+    net = make_push_qnet(cfg.model, vocab_size=vocab, camera_distance=CAMERA_DISTANCE, num_classes=len(CLASS_NAMES))
+    actor = make_q_actor(net, Categorical(6273))
+    before = {k: v.clone() for k, v in net.state_dict().items()}
+    checkpoint = REPO / "checkpoints/dqn_geometric_student/checkpoints/checkpoint-000000000008"
+    Checkpoint(policy=actor).load(checkpoint, components=["policy"], strict="error", map_location="cpu")
+    assert any(not torch.equal(before[k], v) for k, v in net.state_dict().items())
 
 
 def run_quick_chain(root, **env):

@@ -41,3 +41,17 @@ def test_refused_unless_allowed(tmp_path, capsys):
         refuse_changed_config(saved, _with(optim__lr=1.0))
     assert refuse_changed_config(saved, _with(optim__lr=1.0), allow=True) == ["optim.lr: 0.0005 -> 1.0"]
     assert "continuing under changed settings" in capsys.readouterr().out
+
+
+def test_demonstration_settings_are_free_only_when_neither_run_learns_from_demonstrations(tmp_path):
+    """A changed default of demos.* changes no experiment that never reads it; one that does is refused."""
+    from conftest import load_recipe
+
+    resumable = load_recipe("train_dqn").resumable
+    saved = tmp_path / "config.yaml"
+    OmegaConf.save(OmegaConf.create({**RUN, "demos": {"path": None, "loss": "margin"}}), saved)
+    plain = {**RUN, "demos": {"path": None, "loss": "push_cross_entropy"}}
+    assert refuse_changed_config(saved, plain, free=resumable(saved, plain)) == []
+    imitating = {**RUN, "demos": {"path": "runs/demos", "loss": "push_cross_entropy"}}
+    with pytest.raises(ValueError, match=r"demos\.loss: 'margin' -> 'push_cross_entropy'"):
+        refuse_changed_config(saved, imitating, free=resumable(saved, imitating))

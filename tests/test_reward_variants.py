@@ -50,9 +50,8 @@ def test_the_answering_systems_read_the_folders_it_writes():
 def test_the_variants_continue_the_students_network_with_a_gentle_rl_phase():
     """The continuation must build the student's network (its checkpoint loads), and only the RL phase's step size
     and demonstration weight differ: at the student's 5e-4 / 0.5 the RL phase undid the imitation (seventeenth attempt)."""
-    student = compose_recipe_config("train_dqn", ["profile=cpu_quick_student"])
-    variant = compose_recipe_config("train_dqn", ["profile=cpu_dqfd_variant", "reward=local"])
+    student = compose_recipe_config("train_dqn", ["profile=student"])
+    variant = compose_recipe_config("train_dqn", ["profile=dqfd", "reward=local"])
     assert variant.model == student.model and variant.env == student.env and variant.buffer == student.buffer
     assert variant.optim.lr == 1e-4 < student.optim.lr and variant.demos.weight == 2.0 > student.demos.weight
     assert {k: v for k, v in variant.demos.items() if k != "weight"} == {k: v for k, v in student.demos.items() if k != "weight"}
-    assert "profile=cpu_dqfd_variant" in (REPO / "tools/train_reward_variants.sh").read_text()

@@ -4,7 +4,7 @@
 # (global_local) — the demonstrations' loss beside every update, as DQfD does; then its stop is learnt
 # from its own pushes like the student's. The paper's variants trained from scratch on our CPU budget do not
 # uncover the targets (docs/results.md, "Where the policy stands"); these start from a policy that does. The RL phase is
-# gentle (profile=cpu_dqfd_variant: lr 1e-4, demonstration weight 2.0): at the student's 5e-4 / 0.5 it undid the
+# gentle (profile=dqfd: lr 1e-4, demonstration weight 2.0): at the student's 5e-4 / 0.5 it undid the
 # imitation (docs/notebook/policy_attempts.md, sixteenth and seventeenth attempts).
 #
 #   bash tools/train_reward_variants.sh STUDENT_ROOT [OUT_ROOT] [FRAMES] [train_dqn overrides ...]
@@ -51,7 +51,7 @@ for v in ${MQA_VARIANTS:-global local global_local}; do
     mv "$run/.dqn.tmp" "$run/dqn"
   fi
   step "DQN($v): $FRAMES frames with its reward beside the demonstrations -> $run/dqn"
-  python recipes/train_dqn.py dataset=data/mqa "reward=$v" profile=cpu_dqfd_variant \
+  python recipes/train_dqn.py dataset=data/mqa "reward=$v" profile=dqfd \
     "demos.path=[$STUDENT/demos_0,$STUDENT/demos_1]" "seed=$SEED" "out_dir=$run/dqn" resume=true \
     "collector.total_frames=$(( BASE_FRAMES + FRAMES ))" "$@"
   fit_own_stop "$run"

@@ -4,7 +4,7 @@
 #   1. the image teacher's demonstrations on the train split, two processes at once (2 x 600 states, ~1.5 min)
 #      (MQA_TEACHER=refined: the refined teacher instead, its push the best of 9 simulated starts: 9-11.5 min,
 #       the chain 22-24 min; its students beat random on hard in 3 runs of 5, the image teacher's in 4 of 4)
-#   2. the geometric student imitating them (profile=cpu_quick_student: 2,500 updates, the shipped recognition)
+#   2. the geometric student imitating them (profile=student: 2,500 updates, the shipped recognition)
 #   3. its stop, learnt from its own never-stopping episodes on the train split (recipes/fit_stop.py)
 #   4. with MQA_EVAL=<episodes per level>: greedy + learned stop vs random on the test split
 #      (MQA_BASELINE=<an earlier evaluation's out_dir>: reuse its random episodes when they are the same questions)
@@ -49,7 +49,7 @@ pids=()
 for k in 0 1; do
   if [ ! -f "$ROOT/demos_$k/demos.json" ]; then
     python recipes/collect_demonstrations.py "states=${MQA_DEMO_STATES:-600}" "seed=$(( 2 * SEED + k + 100 ))" \
-      oracle.order=visible_first oracle.geometry=visible "oracle.refine_radius=$REFINE" progress=false \
+      "oracle.refine_radius=$REFINE" progress=false \
       "out_dir=$ROOT/demos_$k" &
     pids+=($!)
   fi
@@ -57,7 +57,7 @@ done
 for p in "${pids[@]}"; do wait "$p"; done
 
 step "the geometric student: imitation updates -> $ROOT/dqn"
-python recipes/train_dqn.py dataset=data/mqa reward=global profile=cpu_quick_student \
+python recipes/train_dqn.py dataset=data/mqa reward=global profile=student \
   "demos.path=[$ROOT/demos_0,$ROOT/demos_1]" "seed=$SEED" "out_dir=$ROOT/dqn" resume=true "$@"
 
 fit_own_stop "$ROOT"

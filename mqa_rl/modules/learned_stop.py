@@ -45,7 +45,7 @@ def policy_net(policy) -> PushQNet:
         raise ValueError("a learned stop needs a push Q-network policy (a recipes/train_dqn.py run)")
     if net.class_head is None:
         raise ValueError("a learned stop reads the policy's target map: the run needs model.class_map=true "
-                         "(e.g. profile=cpu_geometric_student)")
+                         "(e.g. profile=student)")
     return net
 
 
