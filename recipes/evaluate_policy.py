@@ -35,9 +35,11 @@ from mqa_rl.envs.video import write_video
 from mqa_rl.evaluation.episode_metrics import mean_ci95
 from mqa_rl.evaluation.rollouts import run_episodes
 from mqa_rl.files import write_atomic
-from mqa_rl.modules.frozen_policies import PushBudget, StopMargin, make_frozen_policy
+from mqa_rl.modules.frozen_policies import make_frozen_policy
 from mqa_rl.modules.learned_stop import LearnedStop
+from mqa_rl.modules.push_budget import PushBudget
 from mqa_rl.modules.random_policy import RandomMQAPolicy
+from mqa_rl.modules.stop_margin import StopMargin
 from mqa_rl.modules.trained_policy import load_greedy
 from mqa_rl.transforms.push_memory import memory_radius
 

@@ -16,7 +16,9 @@ mapping), frozen: nothing here learns.
 ``make_frozen_policy(spec, env)`` returns ``(policy, exploration_type)``: ``policy(td)`` writes
 ``action``; run it under ``set_exploration_type(exploration_type)``. ``is_deterministic(spec)``:
 whether every rollout of a question is the same (the env replays bit-identically), in which case a
-collection needs one rollout per question.
+collection needs one rollout per question. ``resolve_checkpoint(spec)`` pins a dqn spec to the run's
+newest checkpoint. The policies themselves live in their own modules (``stop_policy``, ``stop_margin``,
+``learned_stop``, ``trained_policy``, ``random_policy``, ``privileged_policy``); this file only maps specs to them.
 """
 
 from __future__ import annotations
@@ -24,85 +26,21 @@ from __future__ import annotations
 from collections.abc import Mapping
 from pathlib import Path
 
-import torch
 from omegaconf import OmegaConf
-from tensordict import TensorDictBase
-from tensordict.nn import TensorDictModuleBase
-from torchrl.checkpoint import CheckpointRotation
 from torchrl.envs.utils import ExplorationType
 
-from mqa_rl import keys
-from mqa_rl.envs import actions
 from mqa_rl.modules.learned_stop import LearnedStop
 from mqa_rl.modules.privileged_policy import PrivilegedPushPolicy
 from mqa_rl.modules.push_policy import make_explorer
-from mqa_rl.modules.q_override import best_allowed_push, take_action
-from mqa_rl.modules.trained_policy import load_greedy
 from mqa_rl.modules.random_policy import RandomMQAPolicy
+from mqa_rl.modules.stop_margin import StopMargin
+from mqa_rl.modules.stop_policy import StopPolicy
+from mqa_rl.modules.trained_policy import load_greedy, newest_run_checkpoint
 from mqa_rl.transforms.push_memory import memory_radius
-from mqa_rl.verified_checkpoint import newest_checkpoint
 
 KINDS = ("random", "random_masked", "none", "dqn", "privileged")
 PRIVILEGED_OPTIONS = ("min_visible_px", "min_visible_fraction", "max_tries_per_occluder", "lookahead", "order",
                       "image_visible", "geometry", "refine_radius")
-
-
-class StopPolicy(TensorDictModuleBase):
-    """"No manipulation": stop at the first step, so the last image is the first."""
-
-    in_keys: list = []
-    out_keys = [keys.ACTION]
-
-    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
-        tensordict.set(keys.ACTION, torch.full(tensordict.batch_size, actions.STOP, dtype=torch.int64))
-        return tensordict
-
-
-class PushBudget(TensorDictModuleBase):
-    """``policy``, but it stops once the episode has ``budget`` pushes (the env's ``push_count``).
-
-    A diagnostic for policies that do not learn when to stop: the learned DQN policies either stop at once
-    or push until ``max_pushes``, and a push after the targets are uncovered can cover them again."""
-
-    def __init__(self, policy, budget: int):
-        super().__init__()
-        if budget < 0:
-            raise ValueError(f"a push budget must be >= 0 pushes, got {budget}")
-        self.policy, self.budget = policy, int(budget)
-        self.in_keys = [*getattr(policy, "in_keys", []), keys.PUSH_COUNT]
-        self.out_keys = [keys.ACTION]
-
-    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
-        tensordict = self.policy(tensordict)
-        spent = tensordict.get(keys.PUSH_COUNT).reshape(tensordict.get(keys.ACTION).shape) >= self.budget
-        tensordict.set(keys.ACTION, torch.where(spent, actions.STOP, tensordict.get(keys.ACTION)))
-        return tensordict
-
-
-class StopMargin(TensorDictModuleBase):
-    """A greedy Q policy that stops only when Q(stop) beats its best allowed push by ``margin``.
-
-    Imitation students learn "easy-looking scene -> stop" (97 % of easy episodes stop at once) while their
-    push branch is the part that transfers; a margin > 0 trades stops for the best push. The margin is a
-    decision threshold to choose on the training split (recipes/evaluate_policy.py split=train), never on
-    the test split. ``margin=inf`` never stops (the env's push limit ends the episode)."""
-
-    def __init__(self, policy, margin: float):
-        super().__init__()
-        if margin != margin:
-            raise ValueError("stop_margin is NaN; give a number (0 = plain greedy, inf = never stop)")
-        self.policy, self.margin = policy, float(margin)
-        self.in_keys = list(getattr(policy, "in_keys", []))
-        self.out_keys = list(getattr(policy, "out_keys", [keys.ACTION]))
-
-    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
-        tensordict = self.policy(tensordict)
-        q = tensordict.get(keys.ACTION_VALUE)
-        best_push_q, best_push, any_push = best_allowed_push(q)    # a scene with no allowed push keeps stopping
-        stop_wins = q[..., actions.STOP] >= best_push_q + self.margin
-        action = tensordict.get(keys.ACTION)
-        chosen = torch.where((action == actions.STOP) & any_push & ~stop_wins, best_push.reshape(action.shape), action)
-        return take_action(tensordict, q, chosen)       # Q of the action taken, not of the overruled stop
 
 
 def check_spec(spec: Mapping) -> dict:
@@ -145,7 +83,7 @@ def resolve_checkpoint(spec: Mapping) -> dict:
         spec["push_memory"] = radius
     if spec.get("checkpoint"):
         return spec
-    latest = newest_checkpoint(CheckpointRotation(run / "checkpoints", keep_last=1))
+    latest = newest_run_checkpoint(run)
     if latest is None:
         raise FileNotFoundError(f"no checkpoint in {run / 'checkpoints'}: train the policy first")
     return {**spec, "checkpoint": str(latest)}

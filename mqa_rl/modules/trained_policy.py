@@ -24,6 +24,12 @@ def run_checkpoints(run: str | Path) -> list[Path]:
     return sorted(p for p in directory.glob("checkpoint-*") if p.is_dir()) if directory.is_dir() else []
 
 
+def newest_run_checkpoint(run: str | Path) -> Path | None:
+    """The newest readable checkpoint of a run folder (None when it has none); ``CheckpointCorrupt``
+    when a newer one cannot be read (``newest_checkpoint``)."""
+    return newest_checkpoint(CheckpointRotation(Path(run) / "checkpoints", keep_last=1))
+
+
 def load_greedy(run: str | Path, checkpoint: str | Path | None, env):
     """The trained Q-network of ``run`` (its config.yaml and newest or given checkpoint), greedy.
 
@@ -41,7 +47,7 @@ def load_greedy(run: str | Path, checkpoint: str | Path | None, env):
     actor = make_q_actor(net, env.action_spec, masked=cfg.action_mask)
     path = Path(checkpoint) if checkpoint else None
     if path is None:
-        path = newest_checkpoint(CheckpointRotation(run / "checkpoints", keep_last=1))
+        path = newest_run_checkpoint(run)
         if path is None:
             raise FileNotFoundError(f"no checkpoint in {run / 'checkpoints'}: train first, or give checkpoint=...")
     try:
