@@ -141,8 +141,8 @@ def e2e(dataset: str, frames: int) -> None:
 
 def mask_effect(dataset: str, pushes: int) -> None:
     """What the action mask changes for exploration: ε-random pushes with and without it (hard scenes)."""
-    from mqa_rl.envs.factory import make_mqa_env
     from mqa_rl.modules.random_policy import RandomMQAPolicy
+    from mqa_rl.transforms.mqa_env import make_mqa_env
 
     reward = OmegaConf.to_container(OmegaConf.load(Path(__file__).parents[1] / "recipes/conf/reward/global_local.yaml"))
     env = make_mqa_env(dataset, reward, split=None, difficulties=["hard"], max_pushes=10, seed=0)

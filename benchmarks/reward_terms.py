@@ -11,8 +11,8 @@ import argparse
 import torch
 
 from mqa_rl import keys
-from mqa_rl.envs.factory import make_mqa_env
 from mqa_rl.modules.random_policy import RandomMQAPolicy
+from mqa_rl.transforms.mqa_env import make_mqa_env
 
 ALL_TERMS = {
     "terms": {"exploration": {}, "global_occlusion": {}, "local_occlusion": {"reduce": "max"}},

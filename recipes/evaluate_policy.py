@@ -29,7 +29,6 @@ import hydra
 import torch
 from omegaconf import DictConfig, OmegaConf
 
-from mqa_rl.envs.factory import make_mqa_env
 from mqa_rl.envs.qmap_overlay import qmap_episode_frames
 from mqa_rl.envs.video import write_video
 from mqa_rl.evaluation.episode_metrics import mean_ci95
@@ -41,6 +40,7 @@ from mqa_rl.modules.push_budget import PushBudget
 from mqa_rl.modules.random_policy import RandomMQAPolicy
 from mqa_rl.modules.stop_margin import StopMargin
 from mqa_rl.modules.trained_policy import load_greedy
+from mqa_rl.transforms.mqa_env import make_mqa_env
 from mqa_rl.transforms.push_memory import memory_radius
 
 # References that read the simulator (never a learned policy), as frozen-policy specs: the least-visible-first

@@ -23,9 +23,9 @@ from torchrl.checkpoint import Checkpoint
 
 from mqa_rl import keys
 from mqa_rl.data.dataset import dataset_fingerprint
-from mqa_rl.envs.factory import make_mqa_env
 from mqa_rl.modules.trained_policy import load_greedy
 from mqa_rl.training.policy_export import export_policy, folder_bytes
+from mqa_rl.transforms.mqa_env import make_mqa_env
 
 
 def _git_commit() -> str | None:

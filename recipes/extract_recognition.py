@@ -18,10 +18,10 @@ import hydra
 from omegaconf import DictConfig, OmegaConf
 
 from mqa_rl.data.dataset import dataset_fingerprint
-from mqa_rl.envs.factory import make_mqa_env
 from mqa_rl.modules.pretrained_recognition import save_recognition
 from mqa_rl.modules.push_qnet import PushQNet
 from mqa_rl.modules.trained_policy import load_greedy
+from mqa_rl.transforms.mqa_env import make_mqa_env
 
 
 def extract(cfg: DictConfig) -> Path:

@@ -25,13 +25,13 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 
 from mqa_rl import keys
-from mqa_rl.envs.factory import make_mqa_env
 from mqa_rl.files import write_atomic
 from mqa_rl.modules.learned_stop import FEATURES, policy_fingerprint, policy_net, stop_features
 from mqa_rl.modules.stop_margin import StopMargin
 from mqa_rl.modules.trained_policy import load_greedy
 from mqa_rl.training.optimal_stopping import fit_stop_critic, fixed_rules, stopped_chi
 from mqa_rl.transforms.episode_stats import mean_target_chi
+from mqa_rl.transforms.mqa_env import make_mqa_env
 from mqa_rl.transforms.push_memory import memory_radius
 
 

@@ -16,9 +16,9 @@ from omegaconf import DictConfig, OmegaConf
 
 from mqa_rl import keys
 from mqa_rl.envs import actions
-from mqa_rl.envs.factory import make_mqa_env
 from mqa_rl.envs.video import episode_frames, write_video
 from mqa_rl.modules.random_policy import RandomMQAPolicy
+from mqa_rl.transforms.mqa_env import make_mqa_env
 
 
 def describe_step(t: int, td) -> str:

@@ -31,7 +31,6 @@ from tqdm import tqdm
 from mqa_rl import keys
 from mqa_rl.collectors.demonstrations import load_demonstrations
 from mqa_rl.collectors.factory import make_collector, running
-from mqa_rl.envs.factory import make_mqa_env
 from mqa_rl.envs.qmap_overlay import qmap_episode_frames, qmap_image
 from mqa_rl.envs.video import write_video
 from mqa_rl.evaluation.episode_metrics import episode_metrics, summarise
@@ -48,6 +47,7 @@ from mqa_rl.training.checkpoint import TrainingCheckpoint
 from mqa_rl.training.resume_guard import RESUMABLE, refuse_changed_config
 from mqa_rl.training.run_logger import RunLogger, trim_scalars
 from mqa_rl.training.signals import exit_on_sigterm
+from mqa_rl.transforms.mqa_env import make_mqa_env
 
 
 def check_config(cfg: DictConfig) -> None:

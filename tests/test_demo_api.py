@@ -258,8 +258,8 @@ def test_the_shipped_checkpoints_folder_offers_every_policy_and_the_students_lea
     the weights' fingerprint), and the VQA / encoder / recognition folders passed over, not listed as unusable;
     the student with its stop plays an episode that ends with the stop action or the push budget."""
     from mqa_rl.demo.policies import PolicyRegistry
-    from mqa_rl.envs.factory import make_mqa_env
     from mqa_rl.modules.learned_stop import LearnedStop
+    from mqa_rl.transforms.mqa_env import make_mqa_env
 
     root = Path(__file__).parents[1]
     env = make_mqa_env(small_dataset_dir, REWARD, split=None, max_pushes=3)

@@ -9,9 +9,9 @@ from tensordict import TensorDict
 
 from mqa_rl import keys
 from mqa_rl.envs import actions
-from mqa_rl.envs.factory import make_mqa_env
 from mqa_rl.evaluation.episode_metrics import episode_metrics
 from mqa_rl.transforms.episode_stats import COUNTABLE_PX, targets_in_view
+from mqa_rl.transforms.mqa_env import make_mqa_env
 
 REPO = Path(__file__).parents[1]
 

@@ -6,8 +6,8 @@ from tensordict import TensorDictBase
 
 from mqa_rl import keys
 from mqa_rl.envs import actions
-from mqa_rl.envs.factory import make_mqa_env
 from mqa_rl.modules.push_budget import PushBudget
+from mqa_rl.transforms.mqa_env import make_mqa_env
 from torch_threads import one_torch_thread  # noqa: F401  (autouse)
 
 

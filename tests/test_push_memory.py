@@ -7,7 +7,7 @@ from torchrl.envs.utils import check_env_specs
 
 from mqa_rl import keys
 from mqa_rl.envs import actions
-from mqa_rl.envs.factory import make_mqa_env
+from mqa_rl.transforms.mqa_env import make_mqa_env
 from mqa_rl.transforms.push_memory import PushMemory, memory_radius
 from torch_threads import one_torch_thread  # noqa: F401  (autouse)
 

@@ -10,12 +10,12 @@ from torchrl.envs.utils import check_env_specs
 
 from mqa_rl import keys
 from mqa_rl.envs import actions
-from mqa_rl.envs.factory import make_mqa_env
 from mqa_rl.envs.sapien_bin import SapienBinEnv
 from mqa_rl.transforms import BetaSchedule, make_reward_transform
 from mqa_rl.transforms.factory import register_term
 from mqa_rl.transforms.base import RewardTerm
 from mqa_rl.transforms.functional import local_occlusion_reward
+from mqa_rl.transforms.mqa_env import make_mqa_env
 
 CONF = Path(__file__).parents[1] / "recipes" / "conf" / "reward"
 VARIANTS = sorted(p.stem for p in CONF.glob("*.yaml"))

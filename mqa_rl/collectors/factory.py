@@ -4,7 +4,7 @@
     kind: multi_sync    MultiSyncCollector, ``num_workers`` processes, one batch from all of them
     kind: multi_async   MultiAsyncCollector, workers keep collecting while the learner updates
 
-The env factory is ``mqa_rl.envs.factory.make_mqa_env`` (module level, so spawned workers can
+The env factory is ``mqa_rl.transforms.mqa_env.make_mqa_env`` (module level, so spawned workers can
 import it). The β step counter is a shared-memory tensor handed to every worker through
 ``create_env_kwargs`` (a closure would give each worker a frozen copy). A ``ray`` kind
 (``torchrl.collectors.distributed.RayCollector``) can be added here without touching the recipe.
@@ -21,7 +21,7 @@ from collections.abc import Mapping
 import torch
 from torchrl.collectors import BaseCollector, Collector, MultiAsyncCollector, MultiSyncCollector
 
-from mqa_rl.envs.factory import make_mqa_env
+from mqa_rl.transforms.mqa_env import make_mqa_env
 
 KINDS = ("single", "multi_sync", "multi_async")
 

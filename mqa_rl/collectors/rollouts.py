@@ -34,10 +34,10 @@ from mqa_rl import keys
 from mqa_rl.data.dataset import LEVELS, MQADataset, dataset_fingerprint
 from mqa_rl.data.questions import QUESTION_TYPES
 from mqa_rl.collectors.store import EpisodeStore
-from mqa_rl.envs.factory import make_mqa_env
 from mqa_rl.envs.sapien_bin import SapienBinEnv
 from mqa_rl.modules.frozen_policies import is_deterministic, make_frozen_policy, resolve_checkpoint
 from mqa_rl.transforms.episode_stats import mean_target_chi
+from mqa_rl.transforms.mqa_env import make_mqa_env
 
 SCHEMA = 1
 IN_PROCESS_BELOW = 8             # fewer episodes than this to collect: no worker processes

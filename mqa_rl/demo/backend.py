@@ -25,8 +25,8 @@ from mqa_rl.demo.questions import QuestionError, SceneQuestions
 from mqa_rl.demo.scenes import SceneCatalog
 from mqa_rl.demo.sessions import EnvPool, PoolBusy, SessionFiles
 from mqa_rl.demo.vqa_adapter import VQARegistry
-from mqa_rl.envs.factory import make_mqa_env
 from mqa_rl.envs.video import write_video
+from mqa_rl.transforms.mqa_env import make_mqa_env
 
 log = logging.getLogger(__name__)
 

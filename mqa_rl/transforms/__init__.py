@@ -2,8 +2,8 @@
 
 Each term (R_e, R_g, R_l, the simple-scene flag, β) is a transform writing its own key under
 ``"reward_terms"``; ``MQAReward`` combines them into ``reward`` with the stop / simple-scene rule.
-``make_reward_transform`` builds a stack from a config. The formulas are in ``functional``.
-Classes are imported lazily (torchrl is heavy).
+``make_reward_transform`` builds a stack from a config; ``mqa_env.make_mqa_env`` wraps the env in it.
+The formulas are in ``functional``. Classes are imported lazily (torchrl is heavy).
 """
 
 _EXPORTS = {

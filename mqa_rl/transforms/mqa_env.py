@@ -1,5 +1,8 @@
 """``make_mqa_env``: SapienBinEnv plus a reward stack, as recipes and collector workers build it.
 
+It lives above the env (in ``transforms``, not ``envs``) because it composes the reward transforms:
+the env measures and imports nothing from the reward package.
+
 Module-level and keyword-driven so that process-based collectors can pickle it; pass the shared β
 step counter through the collector's ``create_env_kwargs`` (see ``BetaSchedule``).
 """
