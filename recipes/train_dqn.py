@@ -42,9 +42,9 @@ from mqa_rl.losses.dqn import make_dqn_loss
 from mqa_rl.losses.replay import annealed_is_beta, compact_transitions, make_replay_buffer
 from mqa_rl.losses.target_map import TargetMapLoss
 from mqa_rl.modules.pretrained_recognition import load_recognition
-from mqa_rl.modules.push_policy import make_explorer, make_push_qnet, make_q_actor
+from mqa_rl.modules.push_policy import RETIRED_OPTIONS, make_explorer, make_push_qnet, make_q_actor
 from mqa_rl.training.checkpoint import TrainingCheckpoint
-from mqa_rl.training.resume_guard import RESUMABLE, refuse_changed_config
+from mqa_rl.training.resume_guard import RESUMABLE, flatten, refuse_changed_config
 from mqa_rl.training.run_logger import RunLogger, trim_scalars
 from mqa_rl.training.signals import exit_on_sigterm
 from mqa_rl.transforms.mqa_env import make_mqa_env
@@ -58,12 +58,9 @@ def check_config(cfg: DictConfig) -> None:
                          f"collector.frames_per_batch={col.frames_per_batch}")
     if loss.updates_per_batch < 0:
         raise ValueError(f"loss.updates_per_batch={loss.updates_per_batch} must be ≥ 0")
-    if cfg.loss.get("target_map_weight", 0) > 0 and not (cfg.model.get("target_head") or cfg.model.get("class_map")):
-        raise ValueError(f"loss.target_map_weight={cfg.loss.target_map_weight} needs model.target_head=true or model.class_map=true "
-                         f"(the auxiliary head it trains)")
-    max_states = (cfg.get("demos") or {}).get("max_states")
-    if max_states is not None and int(max_states) < 1:
-        raise ValueError(f"demos.max_states={max_states} must be ≥ 1 (or null: every demonstration)")
+    if cfg.loss.get("target_map_weight", 0) > 0 and not cfg.model.get("class_map"):
+        raise ValueError(f"loss.target_map_weight={cfg.loss.target_map_weight} needs model.class_map=true "
+                         f"(the target map it trains)")
     if buf.size < buf.batch_size:
         raise ValueError(f"buffer.size={buf.size} must be ≥ buffer.batch_size={buf.batch_size}")
     if not 0.0 <= col.eps_end <= col.eps_init <= 1.0:
@@ -75,12 +72,19 @@ def check_config(cfg: DictConfig) -> None:
                                 f"or point dataset=... at one")
 
 
+# settings removed since, at the value that meant "off": a saved run may name them, a new config does not
+RETIRED_SETTINGS = {**{f"model.{k}": v for k, v in RETIRED_OPTIONS.items()}, "demos.max_states": None}
+
+
 def resumable(saved_config: Path, config: dict) -> tuple[str, ...]:
-    """The settings a resume may change: ``RESUMABLE``, and the demonstrations' settings when neither the saved run
-    nor ``config`` learns from demonstrations (unread then: a changed default of theirs changes no experiment)."""
-    saved = OmegaConf.load(saved_config) if saved_config.exists() else {}
+    """The settings a resume may change: ``RESUMABLE``; the demonstrations' settings when neither the saved run
+    nor ``config`` learns from demonstrations (unread then: a changed default of theirs changes no experiment);
+    and the removed settings the saved run names at their "off" value (they built the same run)."""
+    saved = OmegaConf.to_container(OmegaConf.load(saved_config)) if saved_config.exists() else {}
     no_demos = not (saved.get("demos") or {}).get("path") and not (config.get("demos") or {}).get("path")
-    return RESUMABLE + ("demos.",) if no_demos else RESUMABLE
+    old = flatten(saved)
+    retired = tuple(k for k, off in RETIRED_SETTINGS.items() if k in old and old[k] == off)
+    return RESUMABLE + retired + (("demos.",) if no_demos else ())
 
 
 DEMO_METRICS = ("loss_demo", "demo_agreement", "demo_near", "demo_stop_agreement")
@@ -195,8 +199,6 @@ def train(cfg: DictConfig) -> dict:
     aux_loss = TargetMapLoss(net, aux_weight) if aux_weight > 0 else None
     demo_cfg = cfg.get("demos") or {}
     demos = load_demonstrations(demo_cfg["path"], cfg.dataset) if demo_cfg.get("path") else None
-    if demos is not None and demo_cfg.get("max_states"):      # the first N collected (data-scaling studies)
-        demos = demos[: int(demo_cfg["max_states"])]
     if demos is not None:
         print(f"demonstrations: {len(demos)} states from {demo_cfg['path']}")
     demo_loss = (DemonstrationLoss(net, demo_cfg.get("loss", "margin"), demo_cfg["margin"], demo_cfg["weight"],

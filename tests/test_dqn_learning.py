@@ -150,13 +150,13 @@ def test_is_beta_anneals_to_one_and_bad_loss_configs_fail():
         make_dqn_loss(actor, {"target_update": {"kind": "sometimes"}})
 
 
-def test_target_map_loss_learns_where_the_targets_are_and_refuses_a_net_without_head():
-    """The auxiliary loss trains the shared state + head on the stored visible-target cells; its
-    gradient reaches the trunks (shared with the DQN loss), and it lowers on a fixed batch."""
+def test_target_map_loss_learns_where_the_targets_are_and_refuses_a_net_without_class_map():
+    """The auxiliary loss trains the class map and the question's attention on the stored visible-target
+    cells; its gradient reaches the rgb trunk (shared with the DQN loss), and it lowers on a fixed batch."""
     from mqa_rl.losses.target_map import TargetMapLoss
 
     torch.manual_seed(0)
-    net = make_push_qnet({**SMALL_NET, "target_head": True}, vocab_size=VOCAB, camera_distance=0.9)
+    net = make_push_qnet({**SMALL_NET, "class_map": True}, vocab_size=VOCAB, camera_distance=0.9)
     aux = TargetMapLoss(net, weight=1.0)
     batch = compact_transitions(transitions(8))
     assert batch[keys.TARGET_CELLS].dtype == torch.float16
@@ -170,7 +170,7 @@ def test_target_map_loss_learns_where_the_targets_are_and_refuses_a_net_without_
         aux(batch)["loss_target_map"].backward()
         opt.step()
     assert aux(batch)["loss_target_map"] < 0.5 * first["loss_target_map"]
-    with pytest.raises(ValueError, match="target_head=True"):
+    with pytest.raises(ValueError, match="class_map=True"):
         TargetMapLoss(make_push_qnet(SMALL_NET, vocab_size=VOCAB, camera_distance=0.9))
     with pytest.raises(KeyError, match="target_cells"):
         aux(batch.exclude(keys.TARGET_CELLS))

@@ -225,27 +225,17 @@ def test_rotated_head_config_keeps_the_action_layout():
     assert torch.allclose(flat[:, actions.STOP], maps[:, 8].mean((-2, -1)), atol=1e-6)
 
 
-def test_dilated_push_branch_sees_15_cells_and_stays_equivariant():
-    """dilation 2 over 3 context convs: a push value reads cells up to 7 away (3 undilated); quarter turns
-    still move direction d to d + 2; the stop branch keeps its undilated view."""
-    from mqa_rl.modules.rotated_head import RotatedPushHead
-
-    torch.manual_seed(2)
-    reach = {}
-    for dilation in (1, 2):
-        head = RotatedPushHead(4, (8, 8), context=3, push_channels=3, stop_channels=3, dilation=dilation).eval()
-        push = torch.zeros(1, 3, actions.GRID, actions.GRID, requires_grad=True)
-        head(None, push, torch.zeros(1, 3, actions.GRID, actions.GRID))[0, 0, 14, 14].backward()
-        rows, cols = (push.grad.abs().sum((0, 1)) > 0).nonzero(as_tuple=True)
-        reach[dilation] = int(max((rows - 14).abs().max(), (cols - 14).abs().max()))
-        x = torch.randn(2, 3, actions.GRID, actions.GRID)
-        with torch.no_grad():
-            q, q_turned = head(None, x, x), head(None, torch.rot90(x, 1, dims=(-2, -1)), torch.rot90(x, 1, dims=(-2, -1)))
-        for d in range(actions.DIRECTIONS):
-            torch.testing.assert_close(q_turned[:, (d + 2) % 8], torch.rot90(q[:, d], 1, dims=(-2, -1)), atol=1e-5, rtol=1e-4)
-        assert all(m.dilation == (1, 1) for m in head.stop.modules() if isinstance(m, torch.nn.Conv2d))
-    assert reach[1] == 3 and reach[2] == 7, reach
-    with pytest.raises(ValueError, match="dilation must be an integer >= 1"):
-        RotatedPushHead(4, (8, 8), context=3, dilation=0)
-    with pytest.raises(ValueError, match="head_dilation dilates the rotated head"):
-        make_push_qnet({"trunk": "light", "head_dilation": 2}, vocab_size=VOCAB, camera_distance=0.9)
+def test_a_removed_option_at_its_off_value_builds_the_same_network_and_is_refused_on():
+    """Saved configs (the shipped ones) still name removed options at their off value; switched on, they are
+    refused with where to look rather than silently ignored."""
+    cfg = {"trunk": "light", "head_context": 1}
+    torch.manual_seed(0)
+    plain = make_push_qnet(cfg, vocab_size=VOCAB, camera_distance=0.9)
+    torch.manual_seed(0)
+    saved = make_push_qnet({**cfg, "target_head": False, "film": False, "geometric_stop": False, "boundary_map": False,
+                            "head_dilation": 1}, vocab_size=VOCAB, camera_distance=0.9)
+    assert plain.state_dict().keys() == saved.state_dict().keys()
+    assert all(torch.equal(v, saved.state_dict()[k]) for k, v in plain.state_dict().items())
+    for option, on in (("film", True), ("head_dilation", 2), ("target_head", True)):
+        with pytest.raises(ValueError, match=rf"\['{option}={on}'\] were removed"):
+            make_push_qnet({**cfg, option: on}, vocab_size=VOCAB, camera_distance=0.9)

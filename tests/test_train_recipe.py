@@ -95,7 +95,7 @@ def test_bad_configs_fail_clearly(small_dataset_dir, tmp_path):
         ([f"out_dir={tmp_path / 'b'}", "dataset=/nonexistent/mqa"], "make_dataset.py"),
         ([f"out_dir={tmp_path / 'c'}", "trunk=resnet18", f"model.weights={tmp_path / 'no.pth'}"], "does not exist"),
         ([f"out_dir={tmp_path / 'e'}", "trunk=vgg"], "trunk"),
-        ([f"out_dir={tmp_path / 'f'}", "demos.max_states=0"], "demos.max_states"),
+        ([f"out_dir={tmp_path / 'f'}", "+model.film=true"], "were removed"),
     ]
     for overrides, message in cases:
         out = _run(TRAIN, *base, *overrides, cwd=tmp_path, ok=False)

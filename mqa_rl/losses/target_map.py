@@ -1,9 +1,9 @@
-"""Auxiliary loss: where are the question's targets? (``PushQNet.target_head`` vs the segmentation)
+"""Auxiliary loss: where are the question's targets? (``PushQNet.target_logits`` vs the segmentation)
 
 The paper's Q-network learns to recognise the asked-about class from the DQN reward alone: a few
 scalar rewards per episode for a 20-class recognition problem across a 28 × 28 map. Here the
-shared state (visual features ⊕ question) also predicts, per grid cell, the fraction of pixels
-where a target is visible (``keys.TARGET_CELLS``, from the simulator's segmentation, stored with
+question's attention over the recognised classes (``PushQNet`` with ``class_map``) also predicts, per grid
+cell, the fraction of pixels where a target is visible (``keys.TARGET_CELLS``, from the simulator's segmentation, stored with
 each transition). The segmentation is a training signal only, as in EmbodiedQA's CNN pretraining
 and UNREAL's auxiliary tasks: the policy still acts from rgb, depth and the question.
 """
@@ -28,9 +28,8 @@ class TargetMapLoss(LossModule):
 
     def __init__(self, net: torch.nn.Module, weight: float = 1.0):
         super().__init__()
-        if getattr(net, "target_head", None) is None and getattr(net, "class_head", None) is None:
-            raise ValueError("TargetMapLoss needs a PushQNet built with target_head=True or class_map=True "
-                             "(model.target_head=true or model.class_map=true)")
+        if getattr(net, "class_head", None) is None:
+            raise ValueError("TargetMapLoss needs a PushQNet built with class_map=True (model.class_map=true)")
         if not weight > 0:
             raise ValueError(f"the target-map loss weight must be > 0, got {weight}")
         self.net = net

@@ -72,7 +72,7 @@ def stop_features(net: PushQNet, td: TensorDictBase, max_pushes: int) -> torch.T
     rgb, depth = td.get(keys.RGB), td.get(keys.DEPTH)
     maps = net.geometry_maps(rgb.reshape(-1, *rgb.shape[-3:]), depth.reshape(-1, *depth.shape[-3:]),
                              td.get(keys.QUESTION).reshape(-1, td.get(keys.QUESTION).shape[-1]))
-    t, presence, h_mean, h_max, h_min = maps[:, :5].unbind(1)      # boundary_map's sixth channel unread
+    t, presence, h_mean, h_max, h_min = maps.unbind(1)
     weight = t / t.sum((-2, -1), keepdim=True).clamp(min=1e-6)
     pushes = td.get(keys.PUSH_COUNT).reshape(-1).to(torch.float32)
     out = torch.stack([

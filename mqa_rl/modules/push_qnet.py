@@ -22,18 +22,15 @@ the ImageNet mean/std, to suit pretrained weights.
 Options beyond the paper (``paper`` profile: all off): ``head_context`` 3×3 convs (at the width of
 the first head layer, after a 1×1 reduction) before the final 1×1 layers (a push acts 7 cells away;
 1×1 heads only see their own cell), ``coords`` two channels of grid coordinates (where the walls
-are), ``light_downsample`` (the light trunk on a 2×2-averaged image), ``film`` the question
-scaling and shifting the visual channels (FiLM) before the concatenation, ``target_head`` a 1×1 conv from
-the state (and a hidden layer) to one map that learns where the question's targets are visible (an auxiliary task trained
-on the simulator's segmentation, ``mqa_rl.losses.target_map``; the Q values never read it).
+are), ``light_downsample`` (the light trunk on a 2×2-averaged image).
 
 ``class_map`` (recognition made explicit; pretrain it with ``recipes/pretrain_push_trunk.py``): a 1×1
 ``class_head`` on the rgb trunk gives per-cell class probabilities p [B, 1 + classes, 28, 28] (channel 0:
 no object), the question gives an attention w over the classes (softmax of a linear map of its
 feature), and the map of the question's targets, t = Σ_c w_c p_c, joins the state as one more channel.
 Recognition is then learnt once from the segmentation of a few thousand renders (the paper relied on
-ImageNet features for it) and the DQN learns only where to push given t and depth; with it,
-``target_logits`` is logit(t), so the auxiliary target-map loss trains the question's attention.
+ImageNet features for it) and the DQN learns only where to push given t and depth; ``target_logits`` is
+logit(t), so the auxiliary target-map loss (``mqa_rl.losses.target_map``) trains the question's attention.
 
 ``rotated_head`` (VPG's rotation sharing, ``mqa_rl.modules.rotated_head``): one push head scores "push
 right" on the state rotated for each of the 8 directions, so every demonstration and reward teaches all
@@ -46,16 +43,6 @@ teacher pushes an object that stands higher than a visible target's part next to
 target: a local function of t and height. A push branch that also sees the rgb features memorised the
 70 training scenes (docs/notebook/policy_attempts.md, seventh attempt: 47 % of pushes near the teacher's there, 5 % on new
 scenes); one that sees no appearance has nothing scene-specific to memorise.
-
-``boundary_map`` (with ``geometric_push``): a sixth geometry channel, the class boundary strength
-(``class_boundary``): where the recognised class changes between neighbouring cells, the objects' outlines.
-``head_dilation`` (with ``rotated_head``): the push branch's context convs dilated (``RotatedPushHead``).
-
-``geometric_stop`` (with ``class_map`` and ``rotated_head``): the stop branch, too, reads only those five
-maps plus the tiled question feature (which class is asked: how large its objects are). A stop branch on
-the whole state told the teacher's stops from its pushes in 80 % of training states and 69 % of new
-ones (docs/notebook/policy_attempts.md, eighth attempt), barely above "always push" (66 %): it had
-memorised the scenes as well.
 """
 
 from __future__ import annotations
@@ -70,20 +57,7 @@ from mqa_rl.modules.trunks import conv_stack, make_trunk
 
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
-GEOMETRY_CHANNELS = 5      # target map, object presence, height mean / max / min per cell (+ boundary_map)
-
-
-def class_boundary(probs: torch.Tensor) -> torch.Tensor:
-    """[B, 1, G, G]: how much a cell's class distribution differs from its most different 4-neighbour
-    (total variation, 0…1; the grid's edge counts as no boundary).
-
-    Where two objects of different classes meet, or an object meets the floor, it is high: the outline of
-    the objects the image shows, what the teacher's instance segmentation gives it and a per-cell target map
-    and heights alone do not (two touching objects of the same height are one plateau)."""
-    padded = F.pad(probs, (1, 1, 1, 1), mode="replicate")
-    g = probs.shape[-1]
-    shifts = [padded[..., 1 + dr:1 + dr + g, 1 + dc:1 + dc + g] for dr, dc in ((-1, 0), (1, 0), (0, -1), (0, 1))]
-    return torch.stack([0.5 * (probs - n).abs().sum(1) for n in shifts]).amax(0).unsqueeze(1)
+GEOMETRY_CHANNELS = 5      # target map, object presence, height mean / max / min per cell
 
 
 class QuestionEncoder(nn.Module):
@@ -120,28 +94,15 @@ class PushQNet(nn.Module):
         coords: bool = False,
         depth_scale: float = 0.1,
         freeze_trunk: bool = False,
-        target_head: bool = False,
-        film: bool = False,
         class_map: bool = False,
         num_classes: int = 20,
         rotated_head: bool = False,
         geometric_push: bool = False,
-        geometric_stop: bool = False,
-        boundary_map: bool = False,
-        head_dilation: int = 1,
     ):
         super().__init__()
         if geometric_push and not (class_map and rotated_head):
             raise ValueError("geometric_push needs class_map=true (its target map) and rotated_head=true (its push branch)")
-        if geometric_stop and not (class_map and rotated_head):
-            raise ValueError("geometric_stop needs class_map=true (its target map) and rotated_head=true (its stop branch)")
-        if boundary_map and not geometric_push:
-            raise ValueError("boundary_map is a channel of the geometric push branch: set geometric_push=true")
-        if head_dilation != 1 and not rotated_head:
-            raise ValueError("head_dilation dilates the rotated head's context convs: set rotated_head=true")
-        self.geometric_push, self.geometric_stop = bool(geometric_push), bool(geometric_stop)
-        self.boundary_map = bool(boundary_map)
-        self.geometry_channels = GEOMETRY_CHANNELS + int(self.boundary_map)
+        self.geometric_push = bool(geometric_push)
         self.trunk_name = trunk
         self.imagenet_input = trunk != "light"
         self.depth_channels = 3 if self.imagenet_input else 1    # the ResNets see depth as 3 copies
@@ -162,9 +123,7 @@ class PushQNet(nn.Module):
         self.question_classes = nn.Linear(question_dim, 1 + self.num_classes) if class_map else None
         if rotated_head:      # one push head for all directions (rotated state), its own stop branch
             self.head = RotatedPushHead(state, tuple(head_channels), head_context, actions.DIRECTIONS,
-                                        push_channels=self.geometry_channels if geometric_push else None,
-                                        stop_channels=self.geometry_channels + question_dim if geometric_stop else None,
-                                        dilation=head_dilation)
+                                        push_channels=GEOMETRY_CHANNELS if geometric_push else None)
         elif head_context:    # 1×1 down to head_channels[0], then 3×3 convs at that width
             width = head_channels[0]
             context = [nn.Conv2d(state, width, 1), nn.ReLU(inplace=True)]
@@ -173,11 +132,6 @@ class PushQNet(nn.Module):
             self.head = nn.Sequential(*context, conv_stack([*head_channels, actions.DIRECTIONS + 1], last_relu=False))
         else:                 # the paper: 1×1 convs only
             self.head = nn.Sequential(conv_stack([state, *head_channels, actions.DIRECTIONS + 1], last_relu=False))
-        # FiLM (Perez et al. 2018): the question scales and shifts every visual channel, so "features of
-        # the asked-about class" is one multiplication away; concatenation alone is additive at 1x1.
-        self.film = nn.Linear(question_dim, 2 * fuse_channels[-1]) if film else None
-        self.target_head = nn.Sequential(nn.Conv2d(state, head_channels[0], 1), nn.ReLU(inplace=True),
-                                         nn.Conv2d(head_channels[0], 1, 1)) if target_head and not class_map else None
         self.register_buffer("rgb_mean", torch.tensor(IMAGENET_MEAN).view(1, 3, 1, 1) if self.imagenet_input
                              else torch.full((1, 3, 1, 1), 0.5))
         self.register_buffer("rgb_std", torch.tensor(IMAGENET_STD).view(1, 3, 1, 1) if self.imagenet_input
@@ -239,9 +193,6 @@ class PushQNet(nn.Module):
 
     def _state(self, fr, fd, qf, targets) -> torch.Tensor:
         visual = self.fuse(torch.cat([fr, fd], 1))
-        if self.film is not None:
-            gamma, beta = self.film(qf)[:, :, None, None].chunk(2, dim=1)
-            visual = torch.relu(visual * (1 + gamma) + beta)
         q = qf[:, :, None, None].expand(-1, -1, actions.GRID, actions.GRID)
         parts = [visual, q]
         if self.coords:
@@ -253,8 +204,7 @@ class PushQNet(nn.Module):
         return torch.cat(parts, 1)
 
     def geometry(self, fr: torch.Tensor, depth: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
-        """[B, 5 (6), 28, 28] the geometric push branch's input: t, object presence, height mean / max / min
-        (and, with ``boundary_map``, the class boundary strength).
+        """[B, 5, 28, 28] the geometric push branch's input: t, object presence, height mean / max / min.
 
         The height is pooled over each cell's pixels as they are (a cell's pixels 8r…8r+7 are centred on
         the push start; no ``_align`` shift, which is for the conv trunk's receptive fields)."""
@@ -262,11 +212,10 @@ class PushQNet(nn.Module):
         h = self._height(depth)[:, :1]
         pooled = [F.adaptive_avg_pool2d(h, actions.GRID), F.adaptive_max_pool2d(h, actions.GRID),
                   -F.adaptive_max_pool2d(-h, actions.GRID)]
-        extra = [class_boundary(probs)] if self.boundary_map else []
-        return torch.cat([targets, 1.0 - probs[:, :1], *pooled, *extra], 1)
+        return torch.cat([targets, 1.0 - probs[:, :1], *pooled], 1)
 
     def geometry_maps(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor) -> torch.Tensor:
-        """``geometry`` from the observation: [B, 5 (6), 28, 28] (``class_map``; the learned stop reads it)."""
+        """``geometry`` from the observation: [B, 5, 28, 28] (``class_map``; the learned stop reads it)."""
         if self.class_head is None:
             raise RuntimeError("this PushQNet has no class head: build it with class_map=True")
         fr, qf = self._rgb_features(rgb), self.question(question)
@@ -274,28 +223,19 @@ class PushQNet(nn.Module):
 
     def q_map(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor) -> torch.Tensor:
         """[B, 9, 28, 28]: 8 push direction maps and the stop map (batch dims flattened)."""
-        if self.geometric_push and self.geometric_stop:     # nothing reads the fused state: skip the depth trunk
-            fr, qf = self._rgb_features(rgb), self.question(question)
-            targets, state = self._targets(fr, qf), None
-        else:
-            fr, fd, qf, targets = self._features(rgb, depth, question)
-            state = self._state(fr, fd, qf, targets)
-        if not (self.geometric_push or self.geometric_stop):
+        fr, fd, qf, targets = self._features(rgb, depth, question)
+        state = self._state(fr, fd, qf, targets)
+        if not self.geometric_push:
             return self.head(state)
-        geometry = self.geometry(fr, depth, targets)
-        question = qf[:, :, None, None].expand(-1, -1, actions.GRID, actions.GRID)
-        return self.head(state, geometry if self.geometric_push else None,
-                         torch.cat([geometry, question], 1) if self.geometric_stop else None)
+        return self.head(state, self.geometry(fr, depth, targets))
 
     def target_logits(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor) -> torch.Tensor:
-        """[B, 28, 28] logits of "a target of this question is visible in the cell" (``target_head``, or
-        logit(t) of the class map)."""
-        if self.class_head is not None:       # rgb and question only: the depth trunk plays no part
-            targets = self._targets(self._rgb_features(rgb), self.question(question))
-            return torch.logit(targets.clamp(1e-4, 1 - 1e-4)).squeeze(1)
-        if self.target_head is None:
-            raise RuntimeError("this PushQNet has no target head: build it with target_head=True")
-        return self.target_head(self.state(rgb, depth, question)).squeeze(1)
+        """[B, 28, 28] logits of "a target of this question is visible in the cell": logit(t) of the class map
+        (rgb and question only: the depth trunk plays no part)."""
+        if self.class_head is None:
+            raise RuntimeError("this PushQNet has no target map: build it with class_map=True")
+        targets = self._targets(self._rgb_features(rgb), self.question(question))
+        return torch.logit(targets.clamp(1e-4, 1 - 1e-4)).squeeze(1)
 
     def forward(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor) -> torch.Tensor:
         batch = rgb.shape[:-3]

@@ -10,13 +10,7 @@ map comes from the same layers with their own weights on the unrotated state.
 
 ``push_channels``: the push branch reads its own input (``forward(state, push_input)``), e.g. only the
 question's target map and the height map (``PushQNet(geometric_push=True)``), while the stop branch keeps
-the whole state. ``stop_channels``: the stop branch reads its own input too (``stop_input``; e.g. those maps
-and the tiled question feature, ``PushQNet(geometric_stop=True)``).
-
-``dilation`` (> 1): the push branch's i-th context conv is dilated by ``dilation``**i (Yu & Koltun's context
-module): with 3 context convs and dilation 2 each push value sees 15 × 15 cells instead of 7 × 7. The teacher
-starts its pushes at a target's edge (within 3 cells of a visible target in 99.5 % of its pushes) but aims them
-from the target's centre to its occluder's, and objects span up to ~20 cells: a 7 × 7 view sees their edges only.
+the whole state.
 
 Rotation equivariance by construction: rotating the scene by 90° moves Q of direction d to direction
 d + 2, rotated (``tests/test_push_qnet.py``). Directions follow ``mqa_rl.envs.actions``: d·45°
@@ -34,9 +28,9 @@ from torch import nn
 from mqa_rl.modules.trunks import conv_stack
 
 
-def _branch(width: int, context: int, head_channels: tuple[int, ...], dilation: int = 1) -> nn.Sequential:
-    """3×3 context convs at ``width`` (the i-th dilated by ``dilation``**i), then 1×1 convs down to one map."""
-    return nn.Sequential(conv_stack([width] * (context + 1), kernel=3, dilations=[dilation ** i for i in range(context)]),
+def _branch(width: int, context: int, head_channels: tuple[int, ...]) -> nn.Sequential:
+    """3×3 context convs at ``width``, then 1×1 convs down to one map."""
+    return nn.Sequential(conv_stack([width] * (context + 1), kernel=3),
                          conv_stack([width, *head_channels[1:], 1], last_relu=False))
 
 
@@ -44,19 +38,13 @@ class RotatedPushHead(nn.Module):
     """state [B, C, G, G] → [B, directions + 1, G, G]: push maps by direction, then the stop map."""
 
     def __init__(self, state_channels: int, head_channels: tuple[int, ...] = (16, 16), context: int = 2,
-                 directions: int = 8, pad: int = 2, push_channels: int | None = None,
-                 stop_channels: int | None = None, dilation: int = 1):
+                 directions: int = 8, pad: int = 2, push_channels: int | None = None):
         super().__init__()
         width = head_channels[0]
-        self.reduce = (None if (push_channels and stop_channels)      # neither branch reads the state
-                       else nn.Sequential(nn.Conv2d(state_channels, width, 1), nn.ReLU(inplace=True)))
+        self.reduce = nn.Sequential(nn.Conv2d(state_channels, width, 1), nn.ReLU(inplace=True))
         self.push_reduce = (nn.Sequential(nn.Conv2d(push_channels, width, 1), nn.ReLU(inplace=True))
                             if push_channels else None)
-        self.stop_reduce = (nn.Sequential(nn.Conv2d(stop_channels, width, 1), nn.ReLU(inplace=True))
-                            if stop_channels else None)
-        if int(dilation) < 1:
-            raise ValueError(f"head dilation must be an integer >= 1, got {dilation}")
-        self.push = _branch(width, context, tuple(head_channels), int(dilation))
+        self.push = _branch(width, context, tuple(head_channels))
         self.stop = _branch(width, context, tuple(head_channels))
         self.directions, self.pad = int(directions), int(pad)
         angles = torch.tensor([2 * math.pi * d / directions for d in range(directions)])
@@ -69,23 +57,17 @@ class RotatedPushHead(nn.Module):
         self.register_buffer("to_image_frame", torch.stack([torch.stack([c, -s, zero], -1),
                                                             torch.stack([s, c, zero], -1)], 1), persistent=False)
 
-    @staticmethod
-    def _own_input(reduce: nn.Module, branch_input: torch.Tensor | None, name: str) -> torch.Tensor:
-        if branch_input is None:
-            raise ValueError(f"this head's {name} branch reads its own input: pass {name}_input to the head")
-        return reduce(branch_input)
-
     def _rotate(self, x: torch.Tensor, theta: torch.Tensor) -> torch.Tensor:
         grid = F.affine_grid(theta.to(x.dtype), list(x.shape), align_corners=False)
         return F.grid_sample(x, grid, mode="bilinear", padding_mode="zeros", align_corners=False)
 
-    def forward(self, state: torch.Tensor | None, push_input: torch.Tensor | None = None,
-                stop_input: torch.Tensor | None = None) -> torch.Tensor:
-        """``state`` may be None when both branches read their own inputs (it is not computed then)."""
+    def forward(self, state: torch.Tensor, push_input: torch.Tensor | None = None) -> torch.Tensor:
         k, p = self.directions, self.pad
-        shared = None if self.reduce is None else self.reduce(state)
-        stop = self.stop(self._own_input(self.stop_reduce, stop_input, "stop") if self.stop_reduce else shared)
-        x = self._own_input(self.push_reduce, push_input, "push") if self.push_reduce else shared
+        shared = self.reduce(state)
+        stop = self.stop(shared)
+        if self.push_reduce is not None and push_input is None:
+            raise ValueError("this head's push branch reads its own input: pass push_input to the head")
+        x = self.push_reduce(push_input) if self.push_reduce is not None else shared
         b, _, g, _ = x.shape
         x = F.pad(x, (p, p, p, p))
         x = x.unsqueeze(1).expand(-1, k, -1, -1, -1).reshape(b * k, *x.shape[1:])

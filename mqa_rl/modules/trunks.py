@@ -97,14 +97,11 @@ def load_torchvision_weights(net: nn.Module, arch: str, path: str | Path) -> Non
     net.load_state_dict(state)
 
 
-def conv_stack(channels: list[int], kernel: int = 1, last_relu: bool = True,
-               dilations: list[int] | None = None) -> nn.Sequential:
-    """Convs through ``channels`` (same-size padding), each followed by ReLU (the last only if ``last_relu``);
-    ``dilations``: one per conv (default 1)."""
+def conv_stack(channels: list[int], kernel: int = 1, last_relu: bool = True) -> nn.Sequential:
+    """Convs through ``channels`` (same-size padding), each followed by ReLU (the last only if ``last_relu``)."""
     layers: list[nn.Module] = []
-    dilations = dilations or [1] * (len(channels) - 1)
     for i, (cin, cout) in enumerate(zip(channels[:-1], channels[1:])):
-        layers.append(nn.Conv2d(cin, cout, kernel, padding=dilations[i] * (kernel // 2), dilation=dilations[i]))
+        layers.append(nn.Conv2d(cin, cout, kernel, padding=kernel // 2))
         if last_relu or i < len(channels) - 2:
             layers.append(nn.ReLU(inplace=True))
     return nn.Sequential(*layers)
