@@ -74,7 +74,7 @@ def learning_costs(ds: MQADataset) -> None:
     print(f"encode one frame (frozen encoder, no grad, batch 64): {encode * 1e3:.2f} m{unit}")
     q = torch.tensor([list(ds.questions[0].tokens)] * 64, device=DEVICE)
     labels = torch.zeros(64, dtype=torch.int64, device=DEVICE)
-    for pool in ("eqa", "cells", "classes"):
+    for pool in ("eqa", "classes"):
         model = VQAModel(ds.vocab.itos, ds.answers, pool=pool).train().to(DEVICE)
         feats = model.encode_frames(img).detach()
         loss = VQALoss(vqa_module(model, from_features=True))

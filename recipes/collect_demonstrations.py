@@ -1,11 +1,11 @@
-"""Collect the privileged oracle's demonstrations on the train split, for DQN from demonstrations.
+"""Collect a teacher's demonstrations on the train split, for the students (train_dqn.py demos.path=).
 
-    python recipes/collect_demonstrations.py                     # 2,000 states -> runs/demos
+    python recipes/collect_demonstrations.py                     # the image teacher, 600 states -> runs/demos
+    python recipes/collect_demonstrations.py oracle.refine_radius=1 out_dir=runs/demos_refined   # the refined teacher
     python recipes/train_dqn.py profile=student demos.path=runs/demos ...
-    python recipes/collect_demonstrations.py learner.run=runs/teacher_global out_dir=runs/demos_dagger  # DAgger
 
-The oracle reads the simulator (which target is hidden, which object covers it); the states it meets
-and its actions are stored as the replay stores observations (``mqa_rl.collectors.demonstrations``).
+The teacher reads the simulator (which target is partly visible, which object stands on it); the states it
+meets and its actions are stored as the replay stores observations (``mqa_rl.collectors.demonstrations``).
 Writes ``out_dir/data`` (a memmap TensorDict) and ``out_dir/demos.json`` (settings, dataset
 fingerprint, action statistics), both renamed into place at the end: a killed run leaves nothing
 half-written.
@@ -29,8 +29,6 @@ from mqa_rl.collectors.demonstrations import DEMOS_META, collect_demonstrations
 from mqa_rl.data.dataset import dataset_fingerprint
 from mqa_rl.envs import actions
 from mqa_rl.envs.sapien_bin import SapienBinEnv
-from mqa_rl.modules.stop_margin import StopMargin
-from mqa_rl.modules.trained_policy import load_greedy
 
 def collect(cfg: DictConfig) -> dict:
     out = Path(cfg.out_dir)
@@ -40,18 +38,8 @@ def collect(cfg: DictConfig) -> dict:
         raise FileNotFoundError(f"dataset {cfg.dataset} does not exist: make it with recipes/make_dataset.py")
     torch.manual_seed(cfg.seed)
     env = SapienBinEnv(cfg.dataset, seed=cfg.seed, **OmegaConf.to_container(cfg.env))
-    learner = None
-    if cfg.learner.run:                        # DAgger: the learner acts, the oracle labels
-        learner, _, path = load_greedy(cfg.learner.run, cfg.learner.checkpoint, env)
-        margin = cfg.learner.get("stop_margin")
-        if margin is not None:
-            learner = StopMargin(learner, float(margin))
-        print(f"DAgger: {cfg.learner.share:.0%} of the actions by the greedy policy of {path}"
-              + (f", stopping only by a Q margin of {float(margin)}" if margin is not None else ""))
     t0 = time.perf_counter()
-    demos = collect_demonstrations(env, cfg.states, progress=cfg.progress, learner=learner,
-                                   learner_share=float(cfg.learner.share) if learner is not None else 0.0,
-                                   seed=cfg.seed, **OmegaConf.to_container(cfg.oracle))
+    demos = collect_demonstrations(env, cfg.states, progress=cfg.progress, **OmegaConf.to_container(cfg.oracle))
     seconds = time.perf_counter() - t0
     act = demos.get(keys.ACTION)
     allowed = demos.get(keys.ACTION_MASK).gather(-1, act[:, None]).squeeze(-1)

@@ -3,8 +3,7 @@
     python recipes/evaluate_policy.py run=outputs/train_dqn/local/2026-11-22_09-00-00
     python recipes/evaluate_policy.py run=... policies=[greedy] episodes_per_level=3 video_episodes=3
     python recipes/evaluate_policy.py run=... pusher=arm      # the same policy pushing with the Panda arm
-    python recipes/evaluate_policy.py run=... 'policies=[greedy,random,visible_teacher]'   # + its teacher
-    python recipes/evaluate_policy.py run=... budget=2    # the greedy policy stops after 2 pushes
+    python recipes/evaluate_policy.py run=... 'policies=[greedy,random,image_teacher]'   # + its teacher
     python recipes/evaluate_policy.py run=... split=train stop_margin=0.5   # choose a stop margin on training scenes
     python recipes/evaluate_policy.py run=... stop_critic=runs/stop/x    # stop learnt by recipes/fit_stop.py
 
@@ -36,7 +35,6 @@ from mqa_rl.evaluation.rollouts import run_episodes
 from mqa_rl.files import write_atomic
 from mqa_rl.modules.frozen_policies import make_frozen_policy
 from mqa_rl.modules.learned_stop import LearnedStop
-from mqa_rl.modules.push_budget import PushBudget
 from mqa_rl.modules.random_policy import RandomMQAPolicy
 from mqa_rl.modules.stop_margin import StopMargin
 from mqa_rl.modules.trained_policy import load_greedy
@@ -44,11 +42,10 @@ from mqa_rl.transforms.mqa_env import make_mqa_env
 from mqa_rl.transforms.push_memory import memory_radius
 
 # References that read the simulator (never a learned policy), as frozen-policy specs: the least-visible-first
-# oracle, the teacher of profile=cpu_visible_teacher (only targets the image shows a part of), the
-# image teacher (its occluders and directions from visible pixels and depth alone), and the image teacher
-# whose push is refined by simulating its direction from the 8 neighbouring start cells.
+# oracle, the image teacher (its occluders and directions from visible pixels and depth alone; the students'
+# teacher), and the image teacher whose push is refined by simulating its direction from the 8 neighbouring
+# start cells (the shipped student's).
 ORACLES = {"oracle": {"kind": "privileged", "lookahead": 1},
-           "visible_teacher": {"kind": "privileged", "lookahead": 1, "order": "visible_first", "image_visible": True},
            "image_teacher": {"kind": "privileged", "lookahead": 1, "order": "visible_first", "geometry": "visible"},
            "refined_teacher": {"kind": "privileged", "lookahead": 1, "order": "visible_first", "geometry": "visible",
                                "refine_radius": 1}}
@@ -118,8 +115,6 @@ def main(cfg: DictConfig) -> None:
                     policy = StopMargin(policy, float(cfg.stop_margin))
                 if cfg.stop_critic is not None:
                     policy = LearnedStop.from_file(policy, cfg.stop_critic, max_pushes, push_memory)
-                if cfg.budget is not None:
-                    policy = PushBudget(policy, int(cfg.budget))
 
                 def on_episode(i, rollout, level=level):
                     if i < cfg.video_episodes:

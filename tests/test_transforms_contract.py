@@ -12,7 +12,7 @@ from mqa_rl import keys
 from mqa_rl.transforms import (BetaSchedule, ExplorationReward, GlobalOcclusionReward, LocalOcclusionReward, MQAReward,
                                SimpleSceneFlag, make_reward_transform)
 
-CFG = {"terms": {"global_occlusion": {}, "local_occlusion": {"reduce": {"existence": "min"}}},
+CFG = {"terms": {"global_occlusion": {}, "local_occlusion": {}},
        "question_weights": {"global_occlusion": 0.5, "local_occlusion": 0.5}}
 STACK = make_reward_transform(CFG, push_length=0.12)
 TERM_KEYS = (keys.EXPLORATION, keys.GLOBAL_OCCLUSION, keys.LOCAL_OCCLUSION, keys.SIMPLE_SCENE, keys.BETA, keys.REWARD)
@@ -46,7 +46,6 @@ def scored(td):
     (ExplorationReward(0.12), ("next", *keys.OBJECT_POS), '("next", "info", "object_pos")'),
     (GlobalOcclusionReward(), ("next", *keys.OVERLAP), '("next", "info", "overlap")'),
     (LocalOcclusionReward(), keys.TARGET_MASK, '("info", "target_mask")'),
-    (LocalOcclusionReward({"existence": "min"}), keys.QUESTION_TYPE, '("info", "question_type")'),
     (SimpleSceneFlag(), keys.OVERLAP, '("info", "overlap")'),
     (GlobalOcclusionReward(), "next", '"next" entry'),
 ])

@@ -11,7 +11,7 @@ mapping), frozen: nothing here learns.
                                             push_memory: r (default the run's env.push_memory; < 0: none) runs it
                                             in an env with PushMemory(r), as it was trained (``make_mqa_env(push_memory=r)``)
     {kind: privileged, lookahead: 1}        the oracle reference (reads the simulator; see privileged_policy;
-                                            order: visible_first, image_visible: true = the visible teacher)
+                                            order: visible_first, geometry: visible = the image teacher)
 
 ``make_frozen_policy(spec, env)`` returns ``(policy, exploration_type)``: ``policy(td)`` writes
 ``action``; run it under ``set_exploration_type(exploration_type)``. ``is_deterministic(spec)``:
@@ -40,7 +40,7 @@ from mqa_rl.transforms.push_memory import memory_radius
 
 KINDS = ("random", "random_masked", "none", "dqn", "privileged")
 PRIVILEGED_OPTIONS = ("min_visible_px", "min_visible_fraction", "max_tries_per_occluder", "lookahead", "order",
-                      "image_visible", "geometry", "refine_radius")
+                      "geometry", "refine_radius")
 
 
 def check_spec(spec: Mapping) -> dict:

@@ -11,13 +11,13 @@ through it. When every target is revealed (or nothing covers the hidden ones, or
 occluder was already pushed ``max_tries_per_occluder`` times without success) it stops.
 ``order="visible_first"`` serves the partly visible targets first (most visible first), then the
 hidden ones: a teacher whose choices an image policy can see (``recipes/collect_demonstrations.py``).
-``geometry="visible"`` goes further: the occluders are the objects whose visible pixels border the
-target's visible pixels and stand higher there (depth), and the push direction runs from the target's
-visible centroid to the occluder's: every input of the choice is in the image (and its segmentation),
-where the default reads the full silhouettes, which the camera cannot see.
+``geometry="visible"`` goes further: only targets the image shows a part of are served, the occluders are
+the objects whose visible pixels border the target's visible pixels and stand higher there (depth), and the
+push direction runs from the target's visible centroid to the occluder's: every input of the choice is in the
+image (and its segmentation), where the default reads the full silhouettes, which the camera cannot see.
 ``refine_radius=r`` then simulates the chosen push's direction from every start within r grid cells
-and takes the one that shows the targets best (``benchmarks/push_landscape.py``: the best of the 8
-neighbours uncovers twice what the image teacher's own push does).
+and takes the one that shows the targets best (the best of the 8 neighbours uncovers twice what the image
+teacher's own push does: docs/notebook/policy_attempts.md, after the fifth attempt).
 """
 
 from __future__ import annotations
@@ -46,7 +46,7 @@ class PrivilegedPushPolicy:
 
     def __init__(self, env, min_visible_px: int = 20, min_visible_fraction: float = 0.3,
                  max_tries_per_occluder: int = 2, finger_gap_px: float = 3.0, lookahead: int = 6,
-                 order: str = "least_visible", image_visible: bool = False, geometry: str = "full",
+                 order: str = "least_visible", geometry: str = "full",
                  border_px: int = 4, refine_radius: int = 0):
         self.env = env
         if refine_radius < 0:
@@ -63,9 +63,7 @@ class PrivilegedPushPolicy:
         if geometry not in GEOMETRIES:
             raise ValueError(f"unknown oracle geometry {geometry!r}; choose one of {GEOMETRIES}")
         self.geometry, self.border_px = geometry, int(border_px)
-        self.image_visible = image_visible or geometry == "visible"     # a target the image lacks has no border
         self._tries: dict[tuple[int, int], int] = {}
-        self._last: tuple[int, tuple[int, int]] | None = None     # the last push chosen and its (target, occluder)
         self._episode = None
 
     def revealed(self, visible: np.ndarray, full: np.ndarray) -> np.ndarray:
@@ -80,7 +78,6 @@ class PrivilegedPushPolicy:
         if key != self._episode or int(gt["push_count"]) == 0:
             self._episode, self._tries = key, {}
         candidates = self.candidates(gt)
-        self._last = None
         if not candidates:
             return actions.STOP
         if self.lookahead <= 1 or len(candidates) == 1:
@@ -92,16 +89,7 @@ class PrivilegedPushPolicy:
         if self.refine_radius:
             action = self.refine(action, gt["target"])
         self._tries[pair] = self._tries.get(pair, 0) + 1
-        self._last = (action, pair)
         return action
-
-    def executed(self, action: int) -> None:
-        """The env ran ``action`` after ``choose()``: when another policy's (DAgger's learner), the
-        oracle's push was a label only and its try at that occluder is not counted."""
-        if self._last is not None and int(action) != self._last[0]:
-            pair = self._last[1]
-            self._tries[pair] -= 1
-        self._last = None
 
     def refine(self, action: int, target: np.ndarray) -> int:
         """Of ``action`` and its direction started from the cells within ``refine_radius``, the push
@@ -125,7 +113,7 @@ class PrivilegedPushPolicy:
         each object covering it (most pixels first), pushed straight away from it and ±45°."""
         seg, masks, ids = gt["seg"], gt["masks"], gt["entity_ids"]
         targets = np.flatnonzero(gt["target"] & ~self.revealed(gt["visible"], gt["full"]))
-        if self.image_visible:          # only targets the image shows a part of
+        if self.geometry == "visible":  # only targets the image shows a part of (one it lacks has no border)
             targets = targets[gt["visible"][targets] > 0]
         seen_frac = gt["visible"][targets] / np.maximum(gt["full"][targets], 1)
         if self.order == "least_visible":

@@ -15,12 +15,6 @@ max-fused VQA did not, at one seed). A weighted mean cannot take a maximum.
 Frame vector (``pool``):
 
 * ``"eqa"`` (the paper's): flatten the 32×10×10 map, linear 3200 → 64, ReLU, dropout.
-* ``"cells"`` (ours, for counting): every one of the 10×10 cells gets a 64-d vector (1×1 conv); the
-  question gives ``heads`` query vectors that score each cell (sigmoid: how much of "a can" is
-  here); the frame vector is made from the score-weighted mean of the cells and the scores' sums
-  (a soft area of what the question asks about, which grows with the count) through a linear
-  layer. EQA's global linear layer must fold "how many of each of 20 classes" into 64 numbers
-  before it knows the question; here the question picks what to pool.
 * ``"classes"`` (ours, for counting): the encoder's ``class_head`` and ``density_head`` (supervised in
   pretraining with each cell's class areas and each visible object's centre) give class
   probabilities and per-class object densities on the third block's 24 × 24 map (the 10 × 10
@@ -54,7 +48,6 @@ raise ``ValueError`` for a word or token outside the model's vocabulary.
 from __future__ import annotations
 
 import io
-import math
 from pathlib import Path
 
 import torch
@@ -73,34 +66,9 @@ from mqa_rl.modules.vqa_encoder import FrameEncoder, standardise
 VQA_FORMAT = "mqa_rl.vqa"
 VQA_VERSION = 1
 CHECKPOINT_NAME = "vqa.pt"          # what recipes/train_vqa.py writes into its out_dir
-POOLS = ("eqa", "cells", "classes", "counts")
+POOLS = ("eqa", "classes", "counts")
 FUSIONS = ("attention", "max")
 TRAIN_HINT = "train one with `python recipes/train_vqa.py system=<name>` (it writes <out_dir>/vqa.pt)"
-
-
-class QuestionCellPool(nn.Module):
-    """Question-conditioned pooling of the encoder's cells (``pool="cells"``): [N, C, h, w], q [N, D] → [N, D].
-
-    Scores start low (bias −2: a cell must earn its weight); sums are scaled by 1/√cells and
-    layer-normalised, which made a toy counting batch (white squares) fit 2-3× faster than plain means."""
-
-    def __init__(self, in_channels: int, dim: int, heads: int, dropout: float):
-        super().__init__()
-        self.heads = heads
-        self.cell = nn.Sequential(nn.Conv2d(in_channels, dim, 1), nn.ReLU(inplace=True))
-        self.query = nn.Linear(dim, heads * dim)
-        self.bias = nn.Parameter(torch.full((heads,), -2.0))
-        self.norm = nn.LayerNorm(heads * (dim + 1))
-        self.out = nn.Sequential(nn.Linear(heads * (dim + 1), dim), nn.ReLU(inplace=True), nn.Dropout(dropout))
-
-    def forward(self, feat: torch.Tensor, q: torch.Tensor) -> torch.Tensor:
-        cells = self.cell(feat).flatten(2).transpose(1, 2)                       # [N, hw, D]
-        n, hw, dim = cells.shape
-        queries = self.query(q).view(n, self.heads, dim)                         # [N, H, D]
-        score = torch.sigmoid(queries @ cells.transpose(1, 2) / math.sqrt(dim) + self.bias[:, None])   # [N, H, hw]
-        pooled = (score @ cells) / math.sqrt(hw)                                 # [N, H, D]
-        area = score.sum(-1, keepdim=True) / math.sqrt(hw)                       # [N, H, 1] soft area of the matches
-        return self.out(self.norm(torch.cat([pooled, area], -1).flatten(1)))
 
 
 class _ClassChoice(nn.Module):
@@ -194,8 +162,6 @@ class VQAModel(nn.Module):
         elif pool == "eqa":
             c, h, w = self.encoder.out_shape
             self.image_fc = nn.Sequential(nn.Linear(c * h * w, dim), nn.ReLU(inplace=True), nn.Dropout(dropout))
-        elif pool == "cells":
-            self.image_fc = QuestionCellPool(self.encoder.out_shape[0], dim, cell_heads, dropout)
         else:
             self.image_fc = QuestionClassPool(encoder_classes, dim, cell_heads, dropout)
         self.question = QuestionEncoder(len(self.vocab), embed=dim, hidden=dim, layers=lstm_layers, out=dim)

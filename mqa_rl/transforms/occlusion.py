@@ -6,12 +6,9 @@ of a target must be finite; non-target and padding slots are ignored, whatever t
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-
 import torch
 
 from mqa_rl import keys
-from mqa_rl.data.questions import QUESTION_TYPES
 from mqa_rl.transforms.base import RewardTerm
 from mqa_rl.transforms.checks import required
 from mqa_rl.transforms.functional import global_occlusion_reward, local_occlusion_reward
@@ -35,43 +32,19 @@ class GlobalOcclusionReward(RewardTerm):
 class LocalOcclusionReward(RewardTerm):
     """R_l = (max χ − max χ') / max χ over the targets: progress on the most hidden one.
 
-    ``reduce`` is "max" (paper), "min", or a mapping from question type to either, e.g.
-    ``{"existence": "min"}`` (the authors' code: one uncovered instance answers EXISTENCE);
-    types not in the mapping use "max".
+    ``reduce`` is "max" (paper) or "min" (progress on the least hidden target).
     """
 
     out_key = keys.LOCAL_OCCLUSION
 
-    def __init__(self, reduce: str | dict[str, str] = "max"):
+    def __init__(self, reduce: str = "max"):
         super().__init__()
-        per_type = {t: "max" for t in QUESTION_TYPES}
-        if not isinstance(reduce, (str, Mapping)):
-            raise ValueError(f"LocalOcclusionReward: reduce is 'max', 'min' or {{question type: 'max' | 'min'}}, got {reduce!r}")
-        if isinstance(reduce, str):
-            per_type = {t: reduce for t in QUESTION_TYPES}
-        else:
-            unknown = set(reduce) - set(QUESTION_TYPES)
-            if unknown:
-                raise ValueError(f"LocalOcclusionReward: unknown question types {sorted(unknown, key=str)} in reduce; "
-                                 f"allowed: {QUESTION_TYPES}")
-            per_type.update(reduce)
-        bad = set(per_type.values()) - {"max", "min"}
-        if bad:
-            raise ValueError(f"LocalOcclusionReward: reduce must be 'max' or 'min', got {sorted(bad, key=str)}")
-        self.reduce = per_type
-        self.register_buffer("_use_min", torch.tensor([per_type[t] == "min" for t in QUESTION_TYPES]), persistent=False)
+        if reduce not in ("max", "min"):
+            raise ValueError(f"LocalOcclusionReward: reduce must be 'max' or 'min', got {reduce!r}")
+        self.reduce = reduce
 
     def compute(self, before, after) -> torch.Tensor:
-        chi0, chi1, tgt = _target_overlaps(self, before, after)
-        r_max = local_occlusion_reward(chi0, chi1, tgt, "max")
-        if not self._use_min.any():
-            return r_max
-        r_min = local_occlusion_reward(chi0, chi1, tgt, "min")
-        qtype = required(self, before, keys.QUESTION_TYPE, "root").squeeze(-1)
-        if ((qtype < 0) | (qtype >= len(QUESTION_TYPES))).any():
-            raise ValueError(f"LocalOcclusionReward: {keys.QUESTION_TYPE!r} must index QUESTION_TYPES "
-                             f"[0, {len(QUESTION_TYPES)}), got {qtype.tolist()}")
-        return torch.where(self._use_min.to(qtype.device)[qtype], r_min, r_max)
+        return local_occlusion_reward(*_target_overlaps(self, before, after), self.reduce)
 
 
 class SceneOcclusionReward(RewardTerm):
