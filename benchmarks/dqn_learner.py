@@ -34,9 +34,9 @@ from tensordict import TensorDict
 from torchrl.data import Categorical
 
 from mqa_rl import keys
+from mqa_rl.collectors.replay import compact_transitions, transition_bytes
 from mqa_rl.envs import actions
 from mqa_rl.losses.dqn import make_dqn_loss
-from mqa_rl.losses.replay import compact_transitions, transition_bytes
 from mqa_rl.modules.push_policy import make_push_qnet, make_q_actor
 from mqa_rl.sim.geometry import BinSpec, CameraSpec
 

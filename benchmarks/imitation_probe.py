@@ -31,10 +31,10 @@ from mqa_rl import keys  # noqa: E402
 from mqa_rl.collectors.demonstrations import load_demonstrations  # noqa: E402
 from mqa_rl.data import MQADataset  # noqa: E402
 from mqa_rl.envs import actions  # noqa: E402
-from mqa_rl.losses.augment import DihedralAugment  # noqa: E402
 from mqa_rl.losses.demonstration import DemonstrationLoss, _near  # noqa: E402
 from mqa_rl.modules.pretrained_recognition import load_recognition  # noqa: E402
 from mqa_rl.modules.push_policy import make_push_qnet  # noqa: E402
+from mqa_rl.transforms.dihedral import DihedralAugment  # noqa: E402
 
 ROOT = Path(__file__).parents[1]
 

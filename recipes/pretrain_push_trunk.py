@@ -49,7 +49,8 @@ from mqa_rl.modules.pretrained_recognition import load_recognition, save_recogni
 from mqa_rl.modules.push_policy import make_push_qnet
 from mqa_rl.training.run_logger import RunLogger
 from mqa_rl.training.signals import exit_on_sigterm
-from mqa_rl.training.vqa_data import DIHEDRAL, dihedral, scene_split
+from mqa_rl.training.vqa_data import scene_split
+from mqa_rl.transforms.dihedral import DIHEDRAL, dihedral
 
 RECOGNITION_FILE = "recognition.pt"
 

@@ -40,7 +40,8 @@ from mqa_rl.training.frame_pack import load_frame_pack, save_frame_pack
 from mqa_rl.training.model_checkpoint import ModelCheckpoint
 from mqa_rl.training.run_logger import RunLogger, trim_scalars
 from mqa_rl.training.signals import exit_on_sigterm
-from mqa_rl.training.vqa_data import DIHEDRAL, dihedral, pretraining_frames, scene_split
+from mqa_rl.training.vqa_data import pretraining_frames, scene_split
+from mqa_rl.transforms.dihedral import DIHEDRAL, dihedral
 
 ENCODER_FILE = "encoder.pt"
 

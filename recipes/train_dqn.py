@@ -31,15 +31,14 @@ from tqdm import tqdm
 from mqa_rl import keys
 from mqa_rl.collectors.demonstrations import load_demonstrations
 from mqa_rl.collectors.factory import make_collector, running
+from mqa_rl.collectors.replay import annealed_is_beta, compact_transitions, make_replay_buffer
 from mqa_rl.envs.qmap_overlay import qmap_episode_frames, qmap_image
 from mqa_rl.envs.video import write_video
 from mqa_rl.evaluation.episode_metrics import episode_metrics, summarise
 from mqa_rl.evaluation.rollouts import run_episodes
 from mqa_rl.files import write_atomic
-from mqa_rl.losses.augment import DihedralAugment
 from mqa_rl.losses.demonstration import DemonstrationLoss
 from mqa_rl.losses.dqn import make_dqn_loss
-from mqa_rl.losses.replay import annealed_is_beta, compact_transitions, make_replay_buffer
 from mqa_rl.losses.target_map import TargetMapLoss
 from mqa_rl.modules.pretrained_recognition import load_recognition
 from mqa_rl.modules.push_policy import RETIRED_OPTIONS, make_explorer, make_push_qnet, make_q_actor
@@ -47,6 +46,7 @@ from mqa_rl.training.checkpoint import TrainingCheckpoint
 from mqa_rl.training.resume_guard import RESUMABLE, flatten, refuse_changed_config
 from mqa_rl.training.run_logger import RunLogger, trim_scalars
 from mqa_rl.training.signals import exit_on_sigterm
+from mqa_rl.transforms.dihedral import DihedralAugment
 from mqa_rl.transforms.mqa_env import make_mqa_env
 
 

@@ -43,7 +43,8 @@ from mqa_rl.training.model_checkpoint import ModelCheckpoint
 from mqa_rl.training.resume_guard import RESUMABLE, refuse_changed_config
 from mqa_rl.training.run_logger import RunLogger, trim_scalars
 from mqa_rl.training.signals import exit_on_sigterm
-from mqa_rl.training.vqa_data import DIHEDRAL, dihedral, scene_split
+from mqa_rl.training.vqa_data import scene_split
+from mqa_rl.transforms.dihedral import DIHEDRAL, dihedral
 from mqa_rl.transforms.episode_stats import COUNTABLE_PX
 
 PERCEPTION_FILE = "perception.pt"

@@ -42,8 +42,8 @@ from mqa_rl.modules.vqa_encoder import load_encoder
 from mqa_rl.training.model_checkpoint import ModelCheckpoint
 from mqa_rl.training.run_logger import RunLogger, trim_scalars
 from mqa_rl.training.signals import exit_on_sigterm
-from mqa_rl.training.vqa_data import (DIHEDRAL, Batches, encode_store, load_answering_records,
-                                      question_class_labels, scene_split)
+from mqa_rl.training.vqa_data import Batches, encode_store, load_answering_records, question_class_labels, scene_split
+from mqa_rl.transforms.dihedral import DIHEDRAL
 
 # validation metric that picks the kept checkpoint -> its score (higher is better)
 SELECT = {"accuracy": lambda m: m["val/accuracy"], "loss": lambda m: -m["val/loss"]}

@@ -1,5 +1,6 @@
 """The square's symmetries on transitions: the action index, the Q/mask maps and the images agree,
-and they are the physical rotation / mirror of the push (start cell and direction)."""
+and they are the physical rotation / mirror of the push (start cell and direction); the two numberings
+of the 8 (the replay's and the frame pipelines') name the same 8 symmetries."""
 
 import math
 
@@ -9,9 +10,10 @@ import torch
 from tensordict import TensorDict
 
 from mqa_rl import keys
+from mqa_rl.collectors.replay import make_replay_buffer
 from mqa_rl.envs import actions
-from mqa_rl.losses.augment import DihedralAugment, transform_action, transform_images, transform_push_map
-from mqa_rl.losses.replay import make_replay_buffer
+from mqa_rl.transforms.dihedral import (DIHEDRAL, DihedralAugment, dihedral, mirror_first, transform_action,
+                                        transform_images, transform_push_map)
 
 ELEMENTS = [(k, m) for m in (False, True) for k in range(4)]
 
@@ -46,6 +48,32 @@ def test_the_push_turns_with_the_picture(k, mirror):
         img[0, r * 8:(r + 1) * 8, c * 8:(c + 1) * 8] = 1
         out = transform_images(img, k, mirror)
         assert out[0, r2 * 8:(r2 + 1) * 8, c2 * 8:(c2 + 1) * 8].sum() == 64
+
+
+def test_the_two_numberings_name_the_same_eight_symmetries():
+    """The frames' ``dihedral(x, i)`` turns first, then mirrors: for i >= 4 that is the mirror followed by
+    -i % 4 quarter turns, the replay's (k, mirror) form; both numberings cover all 8 symmetries once."""
+    x = torch.arange(2 * 3 * 5 * 5).reshape(2, 3, 5, 5)
+    for i in range(DIHEDRAL):
+        turned = torch.rot90(x, i % 4, dims=(-2, -1))
+        assert torch.equal(dihedral(x, i), turned.flip(-1) if i >= 4 else turned)
+        assert torch.equal(dihedral(x, i), transform_images(x, (i, -i % 4)[i >= 4], i >= 4))
+    frames = {tuple(dihedral(x, i).flatten().tolist()) for i in range(DIHEDRAL)}
+    replay = {tuple(transform_images(x, *mirror_first(i)).flatten().tolist()) for i in range(DIHEDRAL)}
+    assert len(frames) == DIHEDRAL and frames == replay
+
+
+def test_the_augment_turns_a_sample_by_its_drawn_symmetry_in_the_replays_numbering():
+    """``DihedralAugment`` draws g in [0, 8) per sample and applies ``mirror_first(g)`` to images, mask and action."""
+    data = _batch(16)
+    out = DihedralAugment(generator=torch.Generator().manual_seed(3)).forward(data.clone())
+    picks = torch.randint(0, DIHEDRAL, (16,), generator=torch.Generator().manual_seed(3))
+    for i, g in enumerate(picks.tolist()):
+        k, mirror = mirror_first(g)
+        assert torch.equal(out[keys.RGB][i], transform_images(data[keys.RGB][i], k, mirror))
+        assert torch.equal(out["next", keys.DEPTH][i], transform_images(data["next", keys.DEPTH][i], k, mirror))
+        assert torch.equal(out[keys.ACTION_MASK][i], transform_push_map(data[keys.ACTION_MASK][i], k, mirror))
+        assert out[keys.ACTION][i] == transform_action(data[keys.ACTION][i], k, mirror)
 
 
 def _batch(n=32):

@@ -18,8 +18,8 @@ from tensordict import TensorDict
 from tqdm import tqdm
 
 from mqa_rl import keys
+from mqa_rl.collectors.replay import OBS_KEYS
 from mqa_rl.data.dataset import dataset_fingerprint
-from mqa_rl.losses.replay import OBS_KEYS
 from mqa_rl.modules.privileged_policy import PrivilegedPushPolicy
 
 DEMO_KEYS = (*OBS_KEYS, keys.TARGET_CELLS, keys.ACTION)

@@ -38,7 +38,7 @@ class TargetMapLoss(LossModule):
     def forward(self, tensordict: TensorDictBase) -> TensorDict:
         if keys.TARGET_CELLS not in tensordict.keys(True):
             raise KeyError(f"{keys.TARGET_CELLS} missing from the sampled transitions: the replay must store it "
-                           f"(mqa_rl.losses.replay.REPLAY_KEYS) and the env must write it (SapienBinEnv does)")
+                           f"(mqa_rl.collectors.replay.REPLAY_KEYS) and the env must write it (SapienBinEnv does)")
         cells = tensordict.get(keys.TARGET_CELLS).to(torch.float32)
         logits = self.net.target_logits(tensordict.get(keys.RGB), tensordict.get(keys.DEPTH), tensordict.get(keys.QUESTION))
         loss = F.binary_cross_entropy_with_logits(logits, cells.reshape(logits.shape))

@@ -25,19 +25,11 @@ from mqa_rl import keys
 from mqa_rl.collectors.store import SCENE_OFFSET, chunk_paths, load_records, read_meta
 from mqa_rl.data import MQADataset
 from mqa_rl.data.dataset import dataset_fingerprint
+from mqa_rl.transforms.dihedral import DIHEDRAL, dihedral
 
 RECORD_KEYS = (keys.QUESTION, keys.ANSWER_LABEL, keys.TYPE_LABEL, keys.LEVEL, keys.SCENE, keys.QUESTION_ID,
                keys.PUSHES, keys.STOPPED, keys.CHI_START, keys.CHI_END)
 IMAGE_KEYS = (keys.FIRST_RGB, keys.LAST_RGB)
-DIHEDRAL = 8
-
-
-def dihedral(x: torch.Tensor, k: int) -> torch.Tensor:
-    """Transform k ∈ [0, 8) of the image's last two dims: rotation by k·90° (k mod 4), mirrored when k ≥ 4."""
-    x = torch.rot90(x, k % 4, dims=(-2, -1))
-    return x.flip(-1) if k >= 4 else x
-
-
 def load_answering_records(store: str | Path, *, images: bool = True, require_complete: bool = True) -> TensorDict:
     """Records [N] of a rollout store, sorted by slot; with ``images`` both frames' rgb (uint8)."""
     return load_records(store, (*RECORD_KEYS, *(IMAGE_KEYS if images else ())), require_complete=require_complete)

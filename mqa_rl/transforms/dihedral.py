@@ -1,15 +1,26 @@
-"""The bin's symmetries as replay augmentation: each sampled transition seen rotated or mirrored.
+"""The bin's symmetries: the 8 rotations and mirrors of the square (dihedral group D4) on images, on
+push maps and actions, and as replay augmentation (``DihedralAugment``).
 
 The bin is square and the camera looks straight down at its centre, so turning the whole picture
 by 90° (or mirroring it) gives another scene the robot could meet, whose pushes are the same pushes
 turned alike and earn the same reward (the physics has no preferred horizontal direction). The 8
-elements of the square's symmetry group (dihedral group D4) turn one stored transition into 8
-training examples: a pixel-wise Q-network must otherwise learn "push the occluder away from the
-target" separately for every direction and every part of the bin, from a few thousand frames.
+elements of the square's symmetry group turn one stored transition into 8 training examples: a
+pixel-wise Q-network must otherwise learn "push the occluder away from the target" separately for
+every direction and every part of the bin, from a few thousand frames. The same holds for the
+answers of a question (counting, existence, logic and "under" are all invariant), hence the frame
+pipelines' augmentation.
 
-Image rotation by k·90° counter-clockwise (``torch.rot90``, as seen) maps push direction d → d + 2k
-(directions turn counter-clockwise in the image, ``mqa_rl.envs.actions``) and cell (r, c) → (N−1−c, r)
-per quarter turn; the mirror (columns reversed) maps d → 4 − d and (r, c) → (r, N−1−c). Stop stays stop.
+A symmetry is ``(k, mirror)``: mirror first (columns reversed), then k quarter turns counter-clockwise
+(``torch.rot90``, as seen). Image rotation by k·90° maps push direction d → d + 2k (directions turn
+counter-clockwise in the image, ``mqa_rl.envs.actions``) and cell (r, c) → (N−1−c, r) per quarter
+turn; the mirror maps d → 4 − d and (r, c) → (r, N−1−c). Stop stays stop.
+
+Two numberings of the 8 by an index i ∈ [0, 8) are in use, each in the training of shipped models (kept
+so that a seeded run draws the same symmetries as before):
+* mirror first, ``mirror_first(i)`` = (i % 4, i ≥ 4): ``DihedralAugment``, the DQN's replay and
+  demonstrations;
+* turns first, ``dihedral(x, i)``: the image turned i % 4 quarter turns, then mirrored when i ≥ 4 (the
+  VQA's feature cache and batches, the pretraining of the VQA encoder, the perception and the push trunk).
 """
 
 from __future__ import annotations
@@ -22,6 +33,20 @@ from mqa_rl import keys
 from mqa_rl.envs import actions
 
 IMAGE_KEYS = (keys.RGB, keys.DEPTH)
+DIHEDRAL = 8            # the number of symmetries
+
+
+def mirror_first(index: int) -> tuple[int, bool]:
+    """``(k, mirror)`` of symmetry ``index`` ∈ [0, 8) in the replay's numbering: k = index % 4, mirrored when ≥ 4."""
+    return index % 4, index >= 4
+
+
+def dihedral(x: torch.Tensor, index: int) -> torch.Tensor:
+    """Symmetry ``index`` ∈ [0, 8) of an image's last two dims in the frame pipelines' numbering: index % 4
+    quarter turns, then mirrored when index ≥ 4; that is ``transform_images(x, -index % 4, True)`` for
+    index ≥ 4 (mirroring after the turns is mirroring before turns the other way)."""
+    x = torch.rot90(x, index % 4, dims=(-2, -1))
+    return x.flip(-1) if index >= 4 else x
 
 
 def transform_push_map(q: torch.Tensor, k: int, mirror: bool) -> torch.Tensor:
@@ -56,7 +81,8 @@ def transform_images(x: torch.Tensor, k: int, mirror: bool) -> torch.Tensor:
 
 
 class DihedralAugment(Transform):
-    """Replay-buffer transform: every sampled transition under a random symmetry of the square.
+    """Replay-buffer transform: every sampled transition under a random symmetry of the square
+    (``mirror_first`` numbering).
 
     Both observations (``root`` and ``"next"``), their action masks, the action and the visible-target
     cells (if stored) are turned alike;
@@ -69,9 +95,9 @@ class DihedralAugment(Transform):
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         flat = tensordict.reshape(-1)
-        picks = torch.randint(0, 8, (flat.shape[0],), generator=self.generator)
+        picks = torch.randint(0, DIHEDRAL, (flat.shape[0],), generator=self.generator)
         for g in picks.unique().tolist():
-            k, mirror = g % 4, g >= 4
+            k, mirror = mirror_first(g)
             if g == 0:
                 continue
             idx = (picks == g).nonzero().squeeze(-1)
