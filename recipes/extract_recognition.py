@@ -1,7 +1,7 @@
 """Write a trained push policy's recognition (rgb trunk, class head, question encoder and its class
 attention) as a recognition file, the format ``recipes/pretrain_push_trunk.py`` writes.
 
-    python recipes/extract_recognition.py run=checkpoints/dqn_refined_student out=runs/recognition/recognition.pt
+    python recipes/extract_recognition.py run=checkpoints/dqn_geometric_student out=runs/recognition/recognition.pt
 
 Why: a policy trained with ``model.pretrained=`` (frozen) carries the pretraining's visual weights
 unchanged, so a new run can start from them without the ~16 minutes of pretraining. The question part
