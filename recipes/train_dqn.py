@@ -5,6 +5,7 @@
     python recipes/train_dqn.py reward=global_local   # DQN(R_g+R_l)
     python recipes/train_dqn.py profile=paper         # the paper's network and settings (ResNet-101, replay 4000)
     python recipes/train_dqn.py out_dir=runs/x resume=true   # continue a killed run from its last checkpoint
+    python recipes/train_dqn.py profile=dqfd init_from=runs/student/dqn out_dir=runs/y   # a new phase from a checkpoint
 
 Config groups (recipes/conf/): reward, trunk, collector, buffer, optim, loss, logger, checkpoint, eval,
 profile. The loop follows TorchRL's sota DQN recipe: collect → extend replay → update → log →
@@ -26,6 +27,7 @@ import hydra
 import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
+from torchrl.checkpoint import Checkpoint, CheckpointRotation
 from tqdm import tqdm
 
 from mqa_rl import keys
@@ -46,6 +48,7 @@ from mqa_rl.training.checkpoint import TrainingCheckpoint
 from mqa_rl.training.resume_guard import RESUMABLE, flatten, refuse_changed_config
 from mqa_rl.training.run_logger import RunLogger, trim_scalars
 from mqa_rl.training.signals import exit_on_sigterm
+from mqa_rl.verified_checkpoint import newest_checkpoint, restore_verified
 from mqa_rl.transforms.dihedral import DihedralAugment
 from mqa_rl.transforms.mqa_env import make_mqa_env
 
@@ -84,7 +87,33 @@ def resumable(saved_config: Path, config: dict) -> tuple[str, ...]:
     no_demos = not (saved.get("demos") or {}).get("path") and not (config.get("demos") or {}).get("path")
     old = flatten(saved)
     retired = tuple(k for k, off in RETIRED_SETTINGS.items() if k in old and old[k] == off)
-    return RESUMABLE + retired + (("demos.",) if no_demos else ())
+    return RESUMABLE + ("init_from",) + retired + (("demos.",) if no_demos else ())
+
+
+INIT_HINT = ("init_from takes a recipes/train_dqn.py run folder (its newest checkpoint), one of its "
+             "checkpoints/checkpoint-* folders, or an exported policy (recipes/export_policy.py, e.g. checkpoints/dqn_local)")
+
+
+def initial_checkpoint(init_from) -> tuple[Path, bool]:
+    """The checkpoint a new run starts from (``init_from``) and whether it is a whole training checkpoint (weights,
+    optimiser, replay, counters: the run continues it as a new phase) or an exported policy (the weights alone)."""
+    path = Path(init_from)
+    if not path.exists():
+        raise FileNotFoundError(f"init_from={path} does not exist; {INIT_HINT}")
+    if path.is_dir() and not (path / "manifest.json").is_file():
+        newest = newest_checkpoint(CheckpointRotation(path / "checkpoints", keep_last=1))
+        if newest is None:
+            raise ValueError(f"init_from={path} holds no checkpoint (no manifest.json, no checkpoints/checkpoint-*); "
+                             f"{INIT_HINT}")
+        path = newest
+    try:
+        components = set(Checkpoint.manifest(path)["components"])
+    except Exception as error:
+        raise ValueError(f"init_from={path} is not a readable checkpoint ({type(error).__name__}: "
+                         f"{str(error)[:200]}); {INIT_HINT}") from error
+    if "policy" not in components:
+        raise ValueError(f"init_from={path} holds no push Q-network (components {sorted(components)}); {INIT_HINT}")
+    return path, {"loss", "optimizer", "trainer_state"} <= components
 
 
 DEMO_METRICS = ("loss_demo", "demo_agreement", "demo_near", "demo_stop_agreement")
@@ -163,7 +192,9 @@ def evaluate(env, actor, cfg: DictConfig, logger: RunLogger, step: int) -> dict[
 def train(cfg: DictConfig) -> dict:
     check_config(cfg)
     out = Path(cfg.out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    # a new run may start from another's checkpoint; a run that has its own continues from that (resume=true)
+    fresh = newest_checkpoint(CheckpointRotation(out / "checkpoints", keep_last=1)) is None
+    init = initial_checkpoint(cfg.init_from) if cfg.get("init_from") and fresh else None
     torch.manual_seed(cfg.seed)
     np.random.seed(cfg.seed)
     random.seed(cfg.seed)
@@ -187,6 +218,9 @@ def train(cfg: DictConfig) -> dict:
         print(f"recognition from {cfg.model.pretrained}: {meta}")
     net = net.to(device)
     actor = make_q_actor(net, eval_env.action_spec, masked=cfg.action_mask)
+    if init is not None:                         # its weights first: a network of another shape is refused here
+        restore_verified(Checkpoint(policy=actor), init[0], "init_from must hold a Q-network of the network this "
+                         "config builds (the same model.* settings)", components=["policy"])
     explore = make_explorer(actor, eval_env.action_spec, eps_init=col.eps_init, eps_end=col.eps_end,
                             annealing_frames=col.annealing_frames, masked=cfg.action_mask).to(device)
     egreedy = explore[-1]
@@ -213,6 +247,8 @@ def train(cfg: DictConfig) -> dict:
 
     params = [p for p in loss.parameters() if p.requires_grad]
     optim = torch.optim.Adam(params, lr=cfg.optim.lr, weight_decay=cfg.optim.weight_decay)
+    created = not out.exists()
+    out.mkdir(parents=True, exist_ok=True)       # the first thing written
     scratch = Path(buf.scratch_dir) if buf.scratch_dir else out / "replay_scratch"
     if scratch.exists():                     # a previous (killed) process's memmap files: not a checkpoint
         shutil.rmtree(scratch)
@@ -239,6 +275,20 @@ def train(cfg: DictConfig) -> dict:
         print(f"resumed from {path} at {state['frames']} frames, {state['updates']} updates, "
               f"{state['demo_pretrain_updates']} demonstration pre-training updates "
               f"({dropped} log rows after it dropped)")
+    elif init is not None and init[1]:
+        try:
+            path = ckpt.load(init[0])
+        except Exception as error:               # e.g. another replay size: leave nothing behind
+            shutil.rmtree(scratch, ignore_errors=True)
+            if created:
+                shutil.rmtree(out, ignore_errors=True)
+            raise ValueError(f"init_from={init[0]} does not fit this config ({str(error)[:300]})") from error
+        state.setdefault("demo_pretrain_updates", 0)
+        state.setdefault("demo_pretrain_seconds", 0.0)
+        print(f"a new phase from {path}: its weights, optimiser, replay buffer and counters ({state['frames']} frames, "
+              f"{state['updates']} updates, {state['demo_pretrain_updates']} demonstration pre-training updates)")
+    elif init is not None:
+        print(f"a new run from the Q-network of {init[0]}")
     elif cfg.resume:
         print(f"resume=true but no checkpoint in {ckpt.directory}: starting a new run")
     config = OmegaConf.to_container(cfg, resolve=True)

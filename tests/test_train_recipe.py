@@ -234,3 +234,57 @@ def test_collector_workers_act_with_the_synced_weights(small_dataset_dir):
         old_choice = old(obs.clone())[keys.ACTION]
     assert torch.equal(data[keys.ACTION], new_choice)
     assert not torch.equal(data[keys.ACTION], old_choice)
+
+
+@pytest.mark.timeout(900)
+def test_init_from_starts_a_new_phase_or_run_and_refuses_what_does_not_fit(small_dataset_dir, tmp_path, capsys):
+    """init_from= continues another run's training checkpoint as a new phase (weights, replay and counters carry
+    on), takes an exported policy's weights alone, and refuses a missing, foreign or mismatched checkpoint
+    before anything is written."""
+    import torch
+
+    from conftest import compose_recipe_config, load_recipe
+    from mqa_rl.envs.sapien_bin import SapienBinEnv
+    from mqa_rl.modules.push_qnet import PushQNet
+    from mqa_rl.modules.trained_policy import load_greedy
+
+    train_dqn, export = load_recipe("train_dqn"), load_recipe("export_policy")
+
+    def cfg(out, *more):
+        return compose_recipe_config("train_dqn", ["profile=smoke", f"dataset={small_dataset_dir}", f"out_dir={out}",
+                                                   "threads=1", "collector.total_frames=16", "eval.interval_frames=16",
+                                                   "checkpoint.interval_frames=16", *more])
+
+    def weights(run):
+        actor, _, _ = load_greedy(run, None, SapienBinEnv(small_dataset_dir, split="test"))
+        net = next(m for m in actor.modules() if isinstance(m, PushQNet))
+        return {k: v.clone() for k, v in net.state_dict().items()}
+
+    first = train_dqn.train(cfg(tmp_path / "first"))
+    assert first["frames"] == 16 and first["updates"] > 0
+    # a new phase under other settings, no updates in it: the first run's weights and counters, 8 more frames
+    phase = train_dqn.train(cfg(tmp_path / "phase", f"init_from={tmp_path / 'first'}", "collector.total_frames=24",
+                                "loss.updates_per_batch=0", "optim.lr=1e-4"))
+    assert "a new phase from" in capsys.readouterr().out
+    assert phase["frames"] == 24 and phase["updates"] == first["updates"]
+    before, after = weights(tmp_path / "first"), weights(tmp_path / "phase")
+    assert all(torch.equal(before[k], after[k]) for k in before)
+    # an exported policy gives the weights alone: a new run, its counters from zero
+    export.export(compose_recipe_config("export_policy", [f"run={tmp_path / 'first'}", f"out_dir={tmp_path / 'exported'}"]))
+    fresh = train_dqn.train(cfg(tmp_path / "fresh", f"init_from={tmp_path / 'exported'}", "loss.updates_per_batch=0"))
+    assert "a new run from the Q-network of" in capsys.readouterr().out
+    assert fresh["frames"] == 16 and fresh["updates"] == 0
+    after = weights(tmp_path / "fresh")
+    assert all(torch.equal(before[k], after[k]) for k in before)
+    # refused, with what to give, and nothing written
+    (tmp_path / "foreign").mkdir()
+    (tmp_path / "foreign" / "notes.txt").write_text("not a run")
+    cases = [(tmp_path / "missing", FileNotFoundError, "does not exist"),
+             (tmp_path / "foreign", ValueError, "holds no checkpoint"),
+             (tmp_path / "foreign" / "notes.txt", ValueError, "not a readable checkpoint"),
+             (tmp_path / "first", Exception, "the same model.\\* settings")]
+    for i, (source, error, message) in enumerate(cases):
+        more = ["model.head_channels=[8,8]"] if source == tmp_path / "first" else []
+        with pytest.raises(error, match=message):
+            train_dqn.train(cfg(tmp_path / f"refused{i}", f"init_from={source}", *more))
+        assert not (tmp_path / f"refused{i}").exists()

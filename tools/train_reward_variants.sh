@@ -14,9 +14,9 @@
 #   MQA_VARIANTS="global local global_local" (default: all three), MQA_EVAL=<episodes per level> and
 #   MQA_BASELINE=<an earlier evaluation's out_dir> as in tools/train_student.sh.
 #
-# Each variant starts from a copy of the student's checkpoint (weights, optimiser, the 8 imitation frames in its
-# replay buffer, counters; not its logger's run). Running the same command again skips finished steps and resumes
-# an interrupted one. Use in the answering recipes as systems dqfd_global / dqfd_local / dqfd_global_local
+# Each variant starts from the student's checkpoint as a new phase (train_dqn.py init_from=: weights, optimiser,
+# the 8 imitation frames in its replay buffer, counters). Running the same command again skips finished steps and
+# resumes an interrupted one. Use in the answering recipes as systems dqfd_global / dqfd_local / dqfd_global_local
 # (recipes/conf/answering/default.yaml), or any OUT_ROOT with systems.dqfd_<variant>.run=... overrides.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
@@ -41,17 +41,8 @@ c = OmegaConf.load(sys.argv[1]); print(c.seed, c.collector.total_frames)" "$STUD
 . tools/policy_steps.sh
 for v in ${MQA_VARIANTS:-global local global_local}; do
   run="$OUT/$v"
-  if ! compgen -G "$run/dqn/checkpoints/checkpoint-*" > /dev/null; then
-    step "DQN($v) starts from $STUDENT/dqn"
-    mkdir -p "$run"
-    rm -rf "$run/.dqn.tmp" && mkdir "$run/.dqn.tmp"
-    # not its config.yaml: the variant continues under its own settings (train_dqn.py writes them), and a
-    # later resume of the variant is checked against those, not the student's
-    cp -r "$STUDENT/dqn/checkpoints" "$STUDENT/dqn/csv" "$run/.dqn.tmp/"
-    mv "$run/.dqn.tmp" "$run/dqn"
-  fi
-  step "DQN($v): $FRAMES frames with its reward beside the demonstrations -> $run/dqn"
-  python recipes/train_dqn.py dataset=data/mqa "reward=$v" profile=dqfd \
+  step "DQN($v): $FRAMES frames with its reward beside the demonstrations, from $STUDENT/dqn -> $run/dqn"
+  python recipes/train_dqn.py dataset=data/mqa "reward=$v" profile=dqfd "init_from=$STUDENT/dqn" \
     "demos.path=[$STUDENT/demos_0,$STUDENT/demos_1]" "seed=$SEED" "out_dir=$run/dqn" resume=true \
     "collector.total_frames=$(( BASE_FRAMES + FRAMES ))" "$@"
   fit_own_stop "$run"
