@@ -18,24 +18,19 @@ read -r -a DQN <<< "${MQA_DQN:-collector.total_frames=480 collector.annealing_fr
 read -r -a PRETRAIN <<< "${MQA_PRETRAIN:-train.steps=100 train.batch_size=16 train.eval_interval=50 frames.max_frames=600}"
 read -r -a VQA <<< "${MQA_VQA:-train.steps=600 train.eval_interval=100}"
 A=(answering=quick "root=$ROOT" "systems.dqn_local.run=$ROOT/dqn_local" "${EXTRA[@]}")
-SYSTEMS=(random no_manipulation dqn_local privileged)
-start=$SECONDS
-step() { echo; echo "=== [$(( (SECONDS - start) / 60 )) min] $*"; }
+SYSTEMS=random,no_manipulation,dqn_local,privileged
+. tools/steps.sh
 
 step "1/6 DQN(R_l), briefly"
 python recipes/train_dqn.py reward=local "out_dir=$ROOT/dqn_local" resume=true "${DQN[@]}"
-for s in "${SYSTEMS[@]}"; do
-  step "2/6 rollouts of $s"
-  python recipes/collect_rollouts.py "${A[@]}" "system=$s"
-done
+step "2/6 rollouts of $SYSTEMS"
+python recipes/collect_rollouts.py -m "${A[@]}" "system=$SYSTEMS"
 step "3/6 VQA encoder pretraining"
 python recipes/pretrain_vqa_encoder.py "${A[@]}" resume=true "${PRETRAIN[@]}"
-for s in "${SYSTEMS[@]}"; do
-  step "4/6 VQA of $s"
-  python recipes/train_vqa.py "${A[@]}" "system=$s" resume=true "${VQA[@]}"
-done
+step "4/6 a VQA per system"
+python recipes/train_vqa.py -m "${A[@]}" "system=$SYSTEMS" resume=true "${VQA[@]}"
 step "5/6 Table III"
-python recipes/evaluate.py "${A[@]}" "report=[$(IFS=,; echo "${SYSTEMS[*]}")]"
+python recipes/evaluate.py "${A[@]}" "report=[$SYSTEMS]"
 step "6/6 videos of DQN(R_l)"
 python recipes/evaluate_policy.py "run=$ROOT/dqn_local" "policies=[greedy]" episodes_per_level=1 video_episodes=1 \
   video_format=mp4 "out_dir=$ROOT/videos"

@@ -15,8 +15,7 @@ cd "$(dirname "${BASH_SOURCE[0]}")/.."
 OUT=${1:-runs/encoder_scenes}
 EXTRA=data/pretrain_s1
 MAIN=runs/answering/rollouts/counting/random/train
-start=$SECONDS
-step() { echo "=== [$(( (SECONDS - start) / 60 )) min $(( (SECONDS - start) % 60 )) s] $*"; }
+. tools/steps.sh
 [ -f "$MAIN/meta.json" ] || { echo "no random rollouts of the main dataset at $MAIN: run python recipes/collect_rollouts.py system=random first" >&2; exit 1; }
 if [ ! -f "$EXTRA/manifest.json" ]; then
   step "a pretraining-only dataset: 1,000 scenes, seed 1 -> $EXTRA"

@@ -6,10 +6,11 @@
 #      MQA_TRAIN=1 trains whatever runs/ lacks instead of using what ships
 #   2. rollouts of random; the VQA encoder pretrained on their frames (~28 min), or the shipped one
 #      (checkpoints/vqa_encoder, pretrained on the same frames) unless MQA_TRAIN=1
-#   3. per system (random, no manipulation, privileged, DQN(R_g), DQN(R_l), DQN(R_g+R_l), our student): rollouts, its VQA
+#   3. the rollouts of every system (random, no manipulation, privileged, DQN(R_g), DQN(R_l), DQN(R_g+R_l), our
+#      student), then a VQA per system: one Hydra multirun each (-m system=...)
 #   4. Table III, per type, policies, Fig. 7                       -> runs/answering/report/counting-eqa
-# Each system is complete before the next starts, and every step resumes or skips what is done, so an
-# interrupted run continues where it stopped and evaluate.py reports the systems finished so far.
+# Every step resumes or skips what is done, so an interrupted run continues where it stopped, and evaluate.py
+# reports the systems finished so far.
 # MQA_VQA=classes: ours instead of EQA's head (the grounded class pool, docs/results.md "Which class is the question
 #   about?") on the encoder pretrained on 1,000 more scenes (checkpoints/vqa_encoder_scenes; MQA_TRAIN=1 pretrains
 #   one here on random's frames instead, tools/pretrain_encoder_scenes.sh remakes the shipped one);
@@ -19,8 +20,7 @@ set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 . tools/bootstrap.sh
 read -r -a EXTRA <<< "${MQA_EXTRA:-}"
-start=$SECONDS
-step() { echo; echo "=== [$(( (SECONDS - start) / 60 )) min] $*"; }
+. tools/steps.sh
 
 for v in global local global_local; do
   if compgen -G "runs/$v/checkpoints/checkpoint-*" > /dev/null; then
@@ -47,15 +47,14 @@ else
   step "VQA encoder pretraining"
   python recipes/pretrain_vqa_encoder.py "${EXTRA[@]}" resume=true
 fi
-for s in random no_manipulation privileged dqn_global dqn_local dqn_global_local dqn_student; do
-  step "rollouts of $s"
-  python recipes/collect_rollouts.py "${EXTRA[@]}" "system=$s"     # random's: already complete, skipped
-  step "VQA of $s"
-  python recipes/train_vqa.py "${EXTRA[@]}" "system=$s" resume=true "${VQA[@]}"
-done
+SYSTEMS=random,no_manipulation,dqn_global,dqn_local,dqn_global_local,privileged,dqn_student
+step "rollouts of $SYSTEMS"
+python recipes/collect_rollouts.py -m "${EXTRA[@]}" "system=$SYSTEMS"     # random's: already complete, skipped
+step "a VQA per system"
+python recipes/train_vqa.py -m "${EXTRA[@]}" "system=$SYSTEMS" resume=true "${VQA[@]}"
 step "Table III"
 # the seven systems made above (the config's dqfd_* come from tools/train_reward_variants.sh: MQA_EXTRA's report= wins)
-python recipes/evaluate.py 'report=[random,no_manipulation,dqn_global,dqn_local,dqn_global_local,privileged,dqn_student]' \
+python recipes/evaluate.py "report=[$SYSTEMS]" \
   "${EXTRA[@]}" "vqa=${MQA_VQA:-eqa}"
 
 step "done"

@@ -38,7 +38,7 @@ done
 read -r SEED BASE_FRAMES < <(python -c "
 import sys; from omegaconf import OmegaConf
 c = OmegaConf.load(sys.argv[1]); print(c.seed, c.collector.total_frames)" "$STUDENT/dqn/config.yaml")
-. tools/policy_steps.sh
+. tools/steps.sh
 for v in ${MQA_VARIANTS:-global local global_local}; do
   run="$OUT/$v"
   step "DQN($v): $FRAMES frames with its reward beside the demonstrations, from $STUDENT/dqn -> $run/dqn"

@@ -28,7 +28,7 @@ esac
 ROOT=${1:-runs/student}
 SEED=${2:-0}
 shift $(( $# < 2 ? $# : 2 ))
-. tools/policy_steps.sh
+. tools/steps.sh
 # a ROOT may already hold demonstrations: only of the teacher asked for (reused), never silently of the other
 for k in 0 1; do
   demos="$ROOT/demos_$k/demos.json"

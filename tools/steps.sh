@@ -1,5 +1,5 @@
-# Steps shared by tools/train_student.sh and tools/train_reward_variants.sh; sourced, not run.
-#   step MESSAGE        prints MESSAGE with the minutes since the sourcing script started
+# Helpers of the multi-step scripts in tools/; sourced, not run.
+#   step MESSAGE        prints MESSAGE with the time since the sourcing script started
 #   fit_own_stop ROOT   the stop learnt from ROOT/dqn's own pushes on the train split -> ROOT/stop (skipped when done)
 #   evaluate_on_test ROOT   with MQA_EVAL=<episodes per level>: greedy + learned stop vs random on the test split
 #                       -> ROOT/eval (MQA_BASELINE=<an earlier evaluation's out_dir>: reuse its random episodes)
