@@ -1,5 +1,5 @@
 """``StopMargin``: a greedy Q policy that stops only when stopping beats its best push by a margin (the
-``stop_margin`` of a dqn system, ``evaluate_policy.py stop_margin=``, the demonstrations' learner)."""
+``stop_margin`` of a dqn system, ``evaluate_policy.py stop_margin=``)."""
 
 from __future__ import annotations
 
