@@ -26,6 +26,17 @@ def write_atomic(path: Path, text: str | bytes) -> Path:
     return path
 
 
+def load_failure(error: Exception) -> str:
+    """Why ``torch.load(..., weights_only=True)`` refused a file, in words for a user: never torch's own
+    advice to retry with ``weights_only=False`` (which would run whatever code the file holds)."""
+    text = str(error)
+    if "Unsupported global" in text:
+        return "it holds pickled Python objects besides tensors, which are never unpickled here"
+    if "Weights only" in text or "weights_only" in text:
+        return "it is not a file of tensors and plain containers"
+    return f"{type(error).__name__}: {text.splitlines()[0][:200] if text else ''}"
+
+
 def save_versioned(path: str | Path, fmt: str, version: int, blob: dict) -> Path:
     """``blob`` with ``format`` and ``version`` to ``path``, through a temporary file and a rename."""
     import torch
@@ -46,7 +57,7 @@ def load_versioned(path: str | Path, fmt: str, version: int, *, what: str, hint:
     try:
         blob = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as error:
-        raise ValueError(f"{path} cannot be read ({type(error).__name__}: {error}); it may be truncated: {hint}") from error
+        raise ValueError(f"{path} cannot be read ({load_failure(error)}); it may be truncated: {hint}") from error
     if not isinstance(blob, dict) or blob.get("format") != fmt:
         raise ValueError(f"{path} is not a {what}; {hint}")
     if int(blob.get("version", 0)) > version:

@@ -113,6 +113,10 @@ def evaluate_system(cfg: DictConfig, ds: MQADataset, name: str, plan_sha: str) -
     model.check_dataset(ds)
     members = model.meta.get("members", [model.meta])
     for path, meta in zip(vqa_paths, members):
+        trained_on = meta.get("rollouts_split") or Path(str(meta.get("rollouts", ""))).name
+        if trained_on == "test":
+            raise ValueError(f"{path} was trained on test-split rollouts ({meta.get('rollouts')}): Table III scores the "
+                             f"test split, so it would be scored on what it learnt; train it on the training split's rollouts")
         if meta.get("system") not in (None, name):
             warnings.warn(f"{path} was trained on the rollouts of {meta['system']!r}, not {name!r}", stacklevel=2)
     t1 = time.perf_counter()

@@ -1,7 +1,7 @@
 """Train the two-frame VQA on one MQA system's training rollouts (the policy is frozen; only the VQA learns).
 
     python recipes/train_vqa.py system=random                       # EQA's model (vqa=eqa), frozen encoder
-    python recipes/train_vqa.py system=dqn_local vqa=cells          # our question-conditioned cell pooling
+    python recipes/train_vqa.py system=random vqa=counting           # the counting perception under the paper's head
     python recipes/train_vqa.py system=random resume=true           # continue a killed run
     python recipes/train_vqa.py system=random encoder.freeze=false device=cuda   # fine-tune the encoder
 
@@ -40,6 +40,8 @@ from mqa_rl.modules.vqa import CHECKPOINT_NAME, VQAModel, grounding_module, save
 from mqa_rl.modules.perception import load_perception
 from mqa_rl.modules.vqa_encoder import load_encoder
 from mqa_rl.training.model_checkpoint import ModelCheckpoint
+from mqa_rl.training.resume_guard import RESUMABLE, refuse_changed_config
+from mqa_rl.training.run_dir import RunLock, positive_ints, refuse_unresumable
 from mqa_rl.training.run_logger import RunLogger, trim_scalars
 from mqa_rl.training.signals import exit_on_sigterm
 from mqa_rl.training.vqa_data import Batches, encode_store, load_answering_records, question_class_labels, scene_split
@@ -52,12 +54,12 @@ MODEL_OPTIONS = ("pool", "image_size", "dim", "lstm_layers", "dropout", "cell_he
 
 def check_config(cfg: DictConfig) -> None:
     t = cfg.train
-    if t.steps <= 0 or t.batch_size <= 0 or t.eval_interval <= 0 or cfg.checkpoint.interval_steps <= 0:
-        raise ValueError("train.steps, train.batch_size, train.eval_interval and checkpoint.interval_steps must be positive")
+    positive_ints(cfg, "train.steps", "train.batch_size", "train.eval_interval", "checkpoint.interval_steps",
+                  "checkpoint.keep_last")
     if not t.grounding_weight >= 0.0:
         raise ValueError(f"train.grounding_weight={t.grounding_weight} must be ≥ 0 (0: the question's classes learnt from answers only)")
     if t.select not in SELECT:
-        raise ValueError(f"train.select={t.select!r}: choose one of {SELECT} (the validation metric that picks vqa.pt)")
+        raise ValueError(f"train.select={t.select!r}: choose one of {sorted(SELECT)} (the validation metric that picks vqa.pt)")
     if not 0.0 <= t.val_fraction < 1.0:
         raise ValueError(f"train.val_fraction={t.val_fraction} must lie in [0, 1)")
     if not Path(cfg.dataset).exists():
@@ -119,10 +121,24 @@ def validate(loss: VQALoss, batches: Batches, device, batch_size: int) -> dict[s
     return out
 
 
+def check_training_rollouts(meta: dict, rollouts: str) -> str:
+    """The split the rollouts were collected on; a VQA learns on training rollouts only (Table III
+    evaluates on the test split, so a VQA that saw it would be scored on what it learnt)."""
+    split = meta.get("plan", {}).get("split")
+    if split != "train":
+        raise ValueError(f"rollouts={rollouts} were collected on the {split!r} split: a VQA trains on the training "
+                         f"split's rollouts only (python recipes/collect_rollouts.py system=... 'splits=[train]')")
+    return split
+
+
 def train(cfg: DictConfig) -> dict:
     check_config(cfg)
     out = Path(cfg.out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    with RunLock(out, "train_vqa.py"):
+        return _train(cfg, out)
+
+
+def _train(cfg: DictConfig, out: Path) -> dict:
     torch.manual_seed(cfg.seed)
     np.random.seed(cfg.seed)
     random.seed(cfg.seed)
@@ -130,6 +146,7 @@ def train(cfg: DictConfig) -> dict:
         torch.set_num_threads(cfg.threads)
     device = torch.device(cfg.device)
     meta = read_meta(cfg.rollouts)
+    split = check_training_rollouts(meta, cfg.rollouts)
     ds = MQADataset(cfg.dataset)
     if meta["dataset"]["manifest_sha256"] != dataset_fingerprint(ds.root):
         raise ValueError(f"the rollouts {cfg.rollouts} were collected on another dataset than {cfg.dataset}")
@@ -145,12 +162,15 @@ def train(cfg: DictConfig) -> dict:
     state = {"step": 0, "best_val": -math.inf, "best_step": -1, "best_accuracy": None, "train_seconds": 0.0,
              "select": cfg.train.select}
     ckpt = ModelCheckpoint(out / "checkpoints", model=model, optimizer=optim, state=state, keep_last=cfg.checkpoint.keep_last)
+    config = OmegaConf.to_container(cfg, resolve=True)
+    refuse_unresumable(out, ckpt.latest() is not None, bool(cfg.resume))
     if ckpt.latest() is not None:
-        if not cfg.resume:
-            raise FileExistsError(f"{out} already holds checkpoints ({ckpt.latest().name}): pass resume=true to "
-                                  f"continue that run, or choose another out_dir")
+        refuse_changed_config(out / "config.yaml", config, allow=bool(cfg.resume_allow_changes),
+                              free=(*RESUMABLE, "train.steps"))
         state.pop("select")                            # runs older than train.select kept by accuracy
         path = ckpt.load()
+        for group in optim.param_groups:               # a deliberate new phase trains under its own settings
+            group["lr"], group["weight_decay"] = float(cfg.train.lr), float(cfg.train.weight_decay)
         started = state.setdefault("select", "accuracy")
         if started != cfg.train.select:
             raise ValueError(f"{out} keeps the checkpoint by val/{started}; resume it with train.select={started} "
@@ -184,13 +204,11 @@ def train(cfg: DictConfig) -> dict:
     print(f"{cfg.system}: {len(train_set)} training episodes, {int(val_mask.sum())} validation episodes "
           f"({'frozen encoder, features' if frozen else 'fine-tuned encoder'}: {feature_seconds:.0f} s)", flush=True)
 
-    config = OmegaConf.to_container(cfg, resolve=True)
-    if not (out / "config.yaml").exists():
-        write_atomic(out / "config.yaml", OmegaConf.to_yaml(OmegaConf.create(config)))
+    write_atomic(out / "config.yaml", OmegaConf.to_yaml(OmegaConf.create(config)))
     logger = RunLogger(out, wandb=cfg.logger.wandb, project=cfg.logger.project,
                        exp_name=f"vqa_{cfg.vqa.name}_{cfg.system}", config=config)
     vqa_meta = {"system": cfg.system, "questions": cfg.questions.name, "question_types": list(cfg.questions.types),
-                "rollouts": str(cfg.rollouts),
+                "rollouts": str(cfg.rollouts), "rollouts_split": split,
                 "dataset_sha256": meta["dataset"]["manifest_sha256"], "policy": meta["policy"],
                 "encoder": {"weights": cfg.encoder.weights, "frozen": frozen, **encoder_meta},
                 "train_episodes": len(train_set), "val_episodes": int(val_mask.sum())}
@@ -216,7 +234,8 @@ def train(cfg: DictConfig) -> dict:
             step = state["step"]
             if step % cfg.train.eval_interval == 0 or step == steps:
                 metrics = {"train/loss": float(np.mean(window_loss)), "train/accuracy": float(np.mean(window_acc)),
-                           "time/steps_per_s": len(window_loss) / max(time.perf_counter() - t_start, 1e-9)}
+                           "time/steps_per_s": len(window_loss) / max(time.perf_counter() - t_start, 1e-9),
+                           "train/lr": optim.param_groups[0]["lr"]}
                 if window_ground:
                     metrics["train/grounding_accuracy"] = float(np.mean(window_ground))
                 window_loss, window_acc, window_ground, t_start = [], [], [], time.perf_counter()

@@ -169,6 +169,16 @@ def test_evaluate_refuses_a_vqa_of_another_vocabulary(small_dataset, trained):
         evaluate.evaluate(compose_recipe_config("evaluate", [*overrides, "progress=false", "report=[privileged]"]))
 
 
+def test_evaluate_refuses_a_vqa_trained_on_test_rollouts(small_dataset, trained, tmp_path):
+    _, overrides = trained
+    leaky = VQAModel(small_dataset.vocab.itos, small_dataset.answers)
+    save_vqa(leaky, tmp_path / "vqa" / "privileged" / "vqa.pt", {"system": "privileged", "rollouts_split": "test"})
+    evaluate = load_recipe("evaluate")
+    with pytest.raises(ValueError, match="trained on test-split rollouts"):
+        evaluate.evaluate(compose_recipe_config("evaluate", [*overrides, "progress=false", "report=[privileged]",
+                                                             f"vqa_dir={tmp_path / 'vqa'}"]))
+
+
 def test_evaluate_from_the_command_line(trained, tmp_path):
     root, overrides = trained
     env = {**os.environ, "PYTHONPATH": str(ROOT)}

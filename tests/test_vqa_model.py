@@ -92,6 +92,10 @@ def test_answer_probs_contract_and_round_trip(tmp_path):
     assert not list((tmp_path / "run").glob(".*"))                 # nothing half-written left behind
 
 
+class Payload:
+    """Any pickled object: unpickling it would import and run code named by the file."""
+
+
 def test_clear_errors_for_checkpoints_and_questions(tmp_path):
     model = VQAModel(VOCAB, ANSWERS)
     with pytest.raises(FileNotFoundError, match="train_vqa.py"):
@@ -104,6 +108,12 @@ def test_clear_errors_for_checkpoints_and_questions(tmp_path):
     torch.save({"policy": torch.zeros(3)}, tmp_path / "dqn.pt")
     with pytest.raises(ValueError, match="not a VQA checkpoint"):
         load_vqa(tmp_path / "dqn.pt")
+    (tmp_path / "noise.pt").write_bytes(bytes(range(256)) * 8)
+    torch.save({"format": "mqa_rl.vqa", "payload": Payload()}, tmp_path / "pickled.pt")   # an object: code on load
+    for name, reason in (("noise.pt", "not a file of tensors"), ("pickled.pt", "never unpickled")):
+        with pytest.raises(ValueError, match=reason) as refused:
+            load_vqa(tmp_path / name)
+        assert "weights_only" not in str(refused.value)               # never the advice to run the file's code
     blob = torch.load(path, weights_only=True)
     blob["config"]["dim"] = 32                                       # weights of another architecture
     torch.save(blob, tmp_path / "mismatch.pt")

@@ -152,6 +152,58 @@ def test_pretrain_and_train_vqa_recipes_write_log_and_resume(small_dataset, answ
         train_vqa.train(compose_recipe_config("train_vqa", [*args, "system=privileged"]))
 
 
+def _lr_rows(run):
+    with open(run / "csv" / "scalars" / "train" / "lr.csv") as f:
+        return [float(row[1]) for row in csv.reader(f)]
+
+
+def test_train_vqa_refuses_test_rollouts_bad_sizes_changed_resumes_dead_runs_and_a_second_writer(small_dataset,
+                                                                                                answering_root, tmp_path):
+    from mqa_rl.training.run_dir import RunLock
+
+    root, overrides = answering_root
+    train_vqa = load_recipe("train_vqa")
+    args = [*overrides, "logger.wandb=false", "logger.progress=false", "system=random", "vqa=eqa", "encoder.weights=null",
+            "encoder.freeze=false", "train.batch_size=4", "train.eval_interval=2", "checkpoint.interval_steps=2",
+            "train.val_fraction=0"]
+    bad = tmp_path / "bad"
+    for override, key in (("train.batch_size=7.5", "train.batch_size"), ("train.steps=0", "train.steps"),
+                          ("checkpoint.interval_steps=-8", "checkpoint.interval_steps")):
+        with pytest.raises(ValueError, match=key):
+            train_vqa.train(compose_recipe_config("train_vqa", [*args, override, f"out_dir={bad}"]))
+    assert not bad.exists()                                               # refused before anything is written
+    test_rollouts = root / "rollouts" / "counting" / "random" / "test"
+    with pytest.raises(ValueError, match="training split"):
+        train_vqa.train(compose_recipe_config("train_vqa", [*args, f"rollouts={test_rollouts}", f"out_dir={bad}"]))
+    assert not (bad / "config.yaml").exists() and not (bad / "csv").exists()
+
+    run = tmp_path / "run"
+    train_vqa.train(compose_recipe_config("train_vqa", [*args, "train.steps=2", f"out_dir={run}"]))
+    assert load_vqa(run).meta["rollouts_split"] == "train"
+    with pytest.raises(ValueError, match="train.lr"):                     # a changed setting is named, not ignored
+        train_vqa.train(compose_recipe_config("train_vqa", [*args, "train.steps=4", "resume=true", "train.lr=0.5",
+                                                            f"out_dir={run}"]))
+    with pytest.raises(ValueError, match="system"):                       # nor another system's rollouts
+        train_vqa.train(compose_recipe_config("train_vqa", [*args, "train.steps=4", "resume=true",
+                                                            "system=no_manipulation", f"out_dir={run}"]))
+    train_vqa.train(compose_recipe_config("train_vqa", [*args, "train.steps=4", "resume=true", "train.lr=0.25",
+                                                        "resume_allow_changes=true", f"out_dir={run}"]))
+    assert _lr_rows(run) == [pytest.approx(1e-3), pytest.approx(0.25)]     # the new phase trains at its own rate
+    with RunLock(run, "train_vqa.py"):                                    # a second writer is refused at once
+        with pytest.raises(RuntimeError, match="another train_vqa.py run"):
+            train_vqa.train(compose_recipe_config("train_vqa", [*args, "train.steps=6", "resume=true",
+                                                                "train.lr=0.25", f"out_dir={run}"]))
+    dead = tmp_path / "dead"                                              # killed before its first checkpoint
+    (dead / "csv").mkdir(parents=True)
+    for resume in ("false", "true"):
+        with pytest.raises(FileExistsError, match="no checkpoint"):
+            train_vqa.train(compose_recipe_config("train_vqa", [*args, "train.steps=2", f"resume={resume}",
+                                                                f"out_dir={dead}"]))
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(NotADirectoryError, match="is a file"):
+        train_vqa.train(compose_recipe_config("train_vqa", [*args, "train.steps=2", f"out_dir={tmp_path / 'file'}"]))
+
+
 def test_train_vqa_keeps_the_checkpoint_its_validation_metric_picks(small_dataset, answering_root, tmp_path, monkeypatch):
     _, overrides = answering_root
     train_vqa = load_recipe("train_vqa")

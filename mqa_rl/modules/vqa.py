@@ -57,7 +57,7 @@ from torch import nn
 
 from mqa_rl import keys
 from mqa_rl.data.vocab import PAD, UNK, words
-from mqa_rl.files import write_atomic
+from mqa_rl.files import load_failure, write_atomic
 from mqa_rl.modules.push_qnet import QuestionEncoder
 from mqa_rl.modules import vote_counting
 from mqa_rl.modules.perception import CountingPerception
@@ -357,7 +357,7 @@ def load_vqa(path: str | Path, map_location: str | torch.device = "cpu") -> VQAM
     try:
         blob = torch.load(path, map_location=map_location, weights_only=True)
     except Exception as error:
-        raise ValueError(f"{path} cannot be read as a VQA checkpoint ({type(error).__name__}: {str(error)[:200]}); it "
+        raise ValueError(f"{path} cannot be read as a VQA checkpoint ({load_failure(error)}); it "
                          f"may be truncated or another kind of file: {TRAIN_HINT}") from error
     fmt = blob.get("format") if isinstance(blob, dict) else None
     if fmt != VQA_FORMAT:
