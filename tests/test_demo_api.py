@@ -112,6 +112,18 @@ def test_bad_questions_get_a_clear_message(served, typed, expected):
         assert "How many <objects> are there in the bin?" in message
 
 
+def test_huge_questions_and_seeds_get_a_short_clear_message(served):
+    backend, _ = served
+    scene_id, q = scene_and_question(backend, "easy")
+    huge = "how many cans " * 700                                          # 9,800 characters of known words
+    for typed, seed, expected in ((huge, 0, "not one of the dataset's question templates"),
+                                  ("zebra " * 2000, 0, "unknown word(s) 'zebra'"),
+                                  (None, 2 ** 70, "out of range")):
+        updates = list(backend.run_episode(scene_id, q.id, typed, RANDOM, None, seed, "probe"))
+        assert len(updates) == 1 and updates[0].done and expected in updates[0].message
+        assert len(updates[0].message) < 1500                             # quoted back cut, not whole
+
+
 def test_typed_question_is_matched_to_the_dataset(served):
     backend, url = served
     scene_id, q = scene_and_question(backend, "easy", "existence")

@@ -28,6 +28,7 @@ Pick a scene (its first camera image), a question (or type one), a policy, and p
 robot pushes objects in the bin live (each push drawn as a red arrow; for a Q-network its Q map
 beside it, warm colours = high Q), the table shows how much of the question's targets is visible and
 the reward terms of every step, and at the end the VQA answers from the first and last images."""
+CACHE_LIFETIME = (600, 3600)     # (every, older than) seconds: Gradio's cached frames and videos are deleted
 # system fonts only: the page must render offline (the default theme fetches web fonts)
 THEME = gr.themes.Default(font=["ui-sans-serif", "system-ui", "sans-serif"],
                           font_mono=["ui-monospace", "monospace"])
@@ -90,7 +91,8 @@ def build_app(backend: DemoBackend) -> gr.Blocks:
             backend.files.release(request.session_hash)
 
     default_policy = (policies.trained or policies.names)[0]
-    with gr.Blocks(title="MQA demo", analytics_enabled=False) as demo:
+    # the live frames and episode videos Gradio caches are deleted an hour after they were made
+    with gr.Blocks(title="MQA demo", analytics_enabled=False, delete_cache=CACHE_LIFETIME) as demo:
         gr.Markdown(INTRO)
         gr.Markdown(backend.status(), elem_id="status")
         with gr.Row():

@@ -31,6 +31,14 @@ from mqa_rl.transforms.mqa_env import make_mqa_env
 log = logging.getLogger(__name__)
 
 
+SEED_LIMIT = 2 ** 32       # numpy's and the env's seeds are 32-bit
+
+
+def _short_number(value) -> str:
+    text = str(value)
+    return text if len(text) <= 24 else f"{text[:10]}…({len(text)} digits)"
+
+
 @dataclass
 class DemoConfig:
     dataset: str | Path                      # a generated dataset folder (recipes/make_dataset.py)
@@ -114,6 +122,8 @@ class DemoBackend:
             self.catalog.card(scene_id)
             question = self.resolve_question(scene_id, question_id, typed)
             self.policies.get(policy)
+            if not 0 <= int(seed) < SEED_LIMIT:
+                raise ValueError(f"seed {_short_number(seed)} is out of range: use a whole number from 0 to {SEED_LIMIT - 1}")
         except (QuestionError, KeyError, ValueError) as error:
             yield EpisodeUpdate(message=str(error.args[0] if error.args else error), done=True)
             return

@@ -21,6 +21,16 @@ TEMPLATES = {
 }
 
 
+MAX_SHOWN = 120           # characters of a typed question quoted back in a message (a page, not a log)
+MAX_UNKNOWN_SHOWN = 8
+
+
+def _shown(text: str, limit: int = MAX_SHOWN) -> str:
+    """``text`` stripped and cut to ``limit`` characters for quoting back to the user."""
+    text = text.strip()
+    return text if len(text) <= limit else text[:limit - 1] + "…"
+
+
 class QuestionError(ValueError):
     """A typed question the dataset does not have; the message says what is accepted."""
 
@@ -74,13 +84,15 @@ class SceneQuestions:
                                 f"or pick one of the scene's questions. Templates: {self.templates_help()}")
         unknown = [w for w in dict.fromkeys(key) if w not in self._known]
         if unknown:
-            raise QuestionError(f"unknown word(s) {', '.join(repr(w) for w in unknown)}: the questions use only "
+            listed = ", ".join(repr(_shown(w, 30)) for w in unknown[:MAX_UNKNOWN_SHOWN])
+            more = f" and {len(unknown) - MAX_UNKNOWN_SHOWN} more" if len(unknown) > MAX_UNKNOWN_SHOWN else ""
+            raise QuestionError(f"unknown word(s) {listed}{more}: the questions use only "
                                 f"these words: {', '.join(self.accepted_words())}")
         if scene_id not in self._text_index:
             self._text_index[scene_id] = {_key(q.text): q for q in self.of_scene(scene_id)}
         found = self._text_index[scene_id].get(key)
         if found is None:
-            raise QuestionError(f"\"{text.strip()}\" is not one of the dataset's question templates: "
+            raise QuestionError(f"\"{_shown(text)}\" is not one of the dataset's question templates: "
                                 f"{self.templates_help()} (two different objects in SPATIAL and LOGIC; "
                                 f"singular with 'a'/'an', plural in COUNTING). Objects: {self.objects_help()}")
         return found
