@@ -24,7 +24,7 @@ from torchrl.checkpoint import Checkpoint
 from mqa_rl import keys
 from mqa_rl.data.dataset import dataset_fingerprint
 from mqa_rl.modules.trained_policy import load_greedy
-from mqa_rl.training.policy_export import export_policy, folder_bytes
+from mqa_rl.training.policy_export import check_export_target, export_policy, folder_bytes
 from mqa_rl.transforms.mqa_env import make_mqa_env
 
 
@@ -43,8 +43,7 @@ def export(cfg: DictConfig) -> dict:
     run = Path(cfg.run)
     if not (run / "config.yaml").exists():
         raise FileNotFoundError(f"{run / 'config.yaml'} not found: run= must be a recipes/train_dqn.py output folder")
-    if Path(cfg.out_dir).exists() and not cfg.overwrite:
-        raise FileExistsError(f"{cfg.out_dir} exists: choose another out_dir, or overwrite=true to replace it")
+    check_export_target(run, Path(cfg.out_dir), bool(cfg.overwrite))      # before the env is built
     run_cfg = OmegaConf.load(run / "config.yaml")
     dataset = str(cfg.dataset or run_cfg.dataset)
     env = make_mqa_env(dataset, split="test", seed=0, image_size=int(run_cfg.env.image_size))

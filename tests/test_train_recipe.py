@@ -288,3 +288,30 @@ def test_init_from_starts_a_new_phase_or_run_and_refuses_what_does_not_fit(small
         with pytest.raises(error, match=message):
             train_dqn.train(cfg(tmp_path / f"refused{i}", f"init_from={source}", *more))
         assert not (tmp_path / f"refused{i}").exists()
+
+
+def test_export_overwrite_replaces_only_an_earlier_export(tmp_path):
+    from mqa_rl.training.policy_export import check_export_target
+
+    run = tmp_path / "X" / "run_a"
+    (run / "checkpoints").mkdir(parents=True)
+    (tmp_path / "X" / "notes.txt").write_text("a user's file")
+    with pytest.raises(ValueError, match="holds the run"):             # the folder holding the run
+        check_export_target(run, tmp_path / "X", overwrite=True)
+    with pytest.raises(ValueError, match="holds the run"):             # the run itself
+        check_export_target(run, run, overwrite=True)
+    other = tmp_path / "other"
+    (other / "checkpoints").mkdir(parents=True)
+    with pytest.raises(FileExistsError, match="not an earlier export"):
+        check_export_target(run, other, overwrite=True)
+    earlier = tmp_path / "earlier"
+    (earlier / "checkpoints").mkdir(parents=True)
+    (earlier / "provenance.json").write_text('{"source_run": "runs/a"}')
+    with pytest.raises(FileExistsError, match="overwrite=true"):
+        check_export_target(run, earlier, overwrite=False)
+    check_export_target(run, earlier, overwrite=True)                  # an earlier export may go
+    check_export_target(run, tmp_path / "new", overwrite=False)
+    (earlier / "mine.txt").write_text("x")                             # ... unless something else lives in it
+    with pytest.raises(FileExistsError, match="not an earlier export"):
+        check_export_target(run, earlier, overwrite=True)
+    assert (tmp_path / "X" / "notes.txt").exists() and run.exists()

@@ -19,12 +19,39 @@ from torchrl.checkpoint import Checkpoint, CheckpointRotation
 from mqa_rl.verified_checkpoint import INTEGRITY, IntegrityAdapter
 
 
+EXPORT_FILES = {"config.yaml", "checkpoints", "csv", "provenance.json"}
+
+
+def is_export(folder: Path) -> bool:
+    """Whether ``folder`` holds an earlier export and nothing else: its provenance names a source run."""
+    try:
+        provenance = json.loads((folder / "provenance.json").read_text())
+    except (OSError, ValueError):
+        return False
+    names = {p.name for p in folder.iterdir()}
+    return isinstance(provenance, dict) and "source_run" in provenance and names <= EXPORT_FILES
+
+
+def check_export_target(run: Path, out_dir: Path, overwrite: bool) -> None:
+    """``overwrite`` may replace an earlier export only: never the run itself, a folder holding the run, or
+    a folder with anything an export does not write (a user's files, another run's checkpoints)."""
+    if not out_dir.exists():
+        return
+    if not overwrite:
+        raise FileExistsError(f"{out_dir} exists: choose another out_dir, or overwrite=true to replace an earlier export")
+    source, target = run.resolve(), out_dir.resolve()
+    if source == target or target in source.parents:
+        raise ValueError(f"out_dir={out_dir} holds the run being exported ({run}): choose another out_dir")
+    if not out_dir.is_dir() or not is_export(out_dir):
+        raise FileExistsError(f"{out_dir} is not an earlier export (it has no export provenance, or holds other files): "
+                              f"overwrite=true replaces only an export; choose another out_dir")
+
+
 def export_policy(actor, run: str | Path, out_dir: str | Path, *, step: int, provenance: dict,
                   overwrite: bool = False) -> Path:
     """Write ``actor``'s weights with ``run``'s config.yaml to ``out_dir`` (atomically); returns it."""
     run, out_dir = Path(run), Path(out_dir)
-    if out_dir.exists() and not overwrite:
-        raise FileExistsError(f"{out_dir} exists: choose another out_dir, or overwrite=true to replace it")
+    check_export_target(run, out_dir, overwrite)
     staging = out_dir.with_name(f".{out_dir.name}.tmp{os.getpid()}")
     shutil.rmtree(staging, ignore_errors=True)
     try:
