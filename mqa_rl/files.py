@@ -37,6 +37,18 @@ def load_failure(error: Exception) -> str:
     return f"{type(error).__name__}: {text.splitlines()[0][:200] if text else ''}"
 
 
+def load_tensors(path: str | Path, *, what: str, hint: str):
+    """A file of tensors and plain containers (``torch.save`` of dicts, lists, numbers, strings) read with
+    ``weights_only=True``: a file holding pickled objects is refused with ``ValueError`` naming it, never
+    unpickled (a crafted cache or results file in a folder a user was handed would run its code)."""
+    import torch
+
+    try:
+        return torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as error:
+        raise ValueError(f"{path} is not a readable {what} ({load_failure(error)}): {hint}") from error
+
+
 def save_versioned(path: str | Path, fmt: str, version: int, blob: dict) -> Path:
     """``blob`` with ``format`` and ``version`` to ``path``, through a temporary file and a rename."""
     import torch

@@ -32,7 +32,7 @@ from mqa_rl.envs.qmap_overlay import qmap_episode_frames
 from mqa_rl.envs.video import write_video
 from mqa_rl.evaluation.episode_metrics import mean_ci95
 from mqa_rl.evaluation.rollouts import run_episodes
-from mqa_rl.files import write_atomic
+from mqa_rl.files import load_tensors, write_atomic
 from mqa_rl.modules.frozen_policies import make_frozen_policy
 from mqa_rl.modules.learned_stop import LearnedStop
 from mqa_rl.modules.random_policy import RandomMQAPolicy
@@ -66,7 +66,7 @@ def reuse_baseline(folder, name: str, meta: dict) -> dict[str, torch.Tensor] | N
     path = Path(folder) / "episodes" / f"{name}_{meta['level']}.pt"
     if not path.is_file():
         return None
-    saved = torch.load(path, weights_only=False)
+    saved = load_tensors(path, what="baseline episodes file", hint="delete it (or give another baseline_from=) to evaluate again")
     # the reward is checked below; the paper's random never reads the action mask, so PushMemory leaves it alone
     ignored = ("reward", "push_memory") if name == "random" else ("reward",)
     same = {k: v for k, v in meta.items() if k not in ignored}

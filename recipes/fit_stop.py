@@ -25,7 +25,7 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 
 from mqa_rl import keys
-from mqa_rl.files import write_atomic
+from mqa_rl.files import load_tensors, write_atomic
 from mqa_rl.modules.learned_stop import FEATURES, policy_fingerprint, policy_net, stop_features
 from mqa_rl.modules.stop_margin import StopMargin
 from mqa_rl.modules.trained_policy import load_greedy
@@ -71,6 +71,15 @@ def score(critic, data: dict, rows: torch.Tensor) -> dict:
             "learned_pushes": float((~stop & valid).long().cumprod(1).sum(1).float().mean()), **fixed_rules(chi, valid)}
 
 
+def cached_trajectories(path: Path, meta: dict) -> dict | None:
+    """An earlier run's trajectories of the same policy and questions, read as tensors only (a cache in a
+    folder a user was handed must not run code), or None."""
+    if not path.is_file():
+        return None
+    saved = load_tensors(path, what="trajectories cache", hint="delete it to collect the trajectories again")
+    return saved["data"] if isinstance(saved, dict) and saved.get("meta") == meta else None
+
+
 @hydra.main(config_path="conf", config_name="fit_stop", version_base="1.3")
 def main(cfg: DictConfig) -> None:
     if not cfg.run or not cfg.out_dir:
@@ -100,10 +109,10 @@ def main(cfg: DictConfig) -> None:
                     "dataset": str(Path(dataset).resolve()), "split": cfg.split, "level": level, "seed": int(cfg.seed),
                     "episodes": int(cfg.episodes_per_level), "max_pushes": max_pushes, "push_memory": push_memory}
             path = out / "trajectories" / f"{level}.pt"
-            saved = torch.load(path, weights_only=False) if path.is_file() else None
-            if saved is not None and saved["meta"] == meta:
-                print(f"{level}: {saved['data']['chi'].shape[0]} episodes reused from {path}", flush=True)
-                levels[level] = saved["data"]
+            reused = cached_trajectories(path, meta)
+            if reused is not None:
+                print(f"{level}: {reused['chi'].shape[0]} episodes reused from {path}", flush=True)
+                levels[level] = reused
                 continue
             env.base_env.set_seed(int(cfg.seed))
             tick = time.time()
