@@ -2,7 +2,7 @@
 on its training rollouts), COUNTING accuracy per level beside the paper's, with 95 % intervals.
 
     python recipes/evaluate.py                                  # questions=counting vqa=eqa
-    python recipes/evaluate.py vqa=cells                        # the VQAs trained with vqa=cells
+    python recipes/evaluate.py vqa=counting                     # the VQAs trained with vqa=counting
     python recipes/evaluate.py questions=all_types              # all four question types, per type and level
     python recipes/evaluate.py 'report=[random,no_manipulation]'
 

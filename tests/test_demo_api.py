@@ -266,7 +266,7 @@ def test_scene_filters_and_question_lists(served):
 
 
 def test_the_shipped_checkpoints_folder_offers_every_policy_and_the_students_learned_stop(small_dataset_dir):
-    """runs=checkpoints: the five shipped train_dqn runs, the student again with its fit_stop critic (matched by
+    """runs=checkpoints: the four shipped train_dqn runs, the student again with its fit_stop critic (matched by
     the weights' fingerprint), and the VQA / encoder / recognition folders passed over, not listed as unusable;
     the student with its stop plays an episode that ends with the stop action or the push budget."""
     from mqa_rl.demo.policies import PolicyRegistry
@@ -279,7 +279,9 @@ def test_the_shipped_checkpoints_folder_offers_every_policy_and_the_students_lea
         registry = PolicyRegistry(root / "checkpoints", env, max_pushes=3)
         assert not registry.problems, registry.problems
         trained = registry.trained
-        assert len([n for n in trained if "learned stop" not in n]) == 5
+        shipped_runs = {p.parent.parent.name for p in (root / "checkpoints").glob("*/checkpoints/checkpoint-*")}
+        assert len(shipped_runs) == 4
+        assert len([n for n in trained if "learned stop" not in n]) == len(shipped_runs)
         stopping = [n for n in trained if "learned stop" in n]
         assert len(stopping) == 1 and "dqn_geometric_student" in stopping[0] and "stop_geometric_student" in stopping[0]
         entry = registry.get(stopping[0])
