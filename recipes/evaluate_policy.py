@@ -61,6 +61,12 @@ def episodes_meta(cfg: DictConfig, dataset, level: str, qtypes, max_pushes: int,
             "question_types": list(qtypes) if qtypes else None, "reward": reward, "push_memory": push_memory}
 
 
+def shown(stat: dict, sep: str = " ± ") -> str:
+    """A mean with its 95 % half-width; the mean alone where there is no interval (one episode: n = 1)."""
+    ci = stat["ci95"]
+    return f"{stat['mean']:+.3f}" if ci != ci else f"{stat['mean']:+.3f}{sep}{ci:.3f}"
+
+
 def reuse_baseline(folder, name: str, meta: dict) -> dict[str, torch.Tensor] | None:
     """The per-episode metrics of policy ``name`` from an earlier evaluation, if on the same questions."""
     path = Path(folder) / "episodes" / f"{name}_{meta['level']}.pt"
@@ -136,9 +142,8 @@ def main(cfg: DictConfig) -> None:
             nan = torch.full((cfg.episodes_per_level,), float("nan"))
             results.setdefault(level, {})[name] = {k: dict(zip(("mean", "ci95", "n"), mean_ci95(m.get(k, nan))))
                                                    for k in REPORTED}
-            print(f"{level:>6} {name:>13}: " + ", ".join(
-                f"{k} {results[level][name][k]['mean']:+.3f}±{results[level][name][k]['ci95']:.3f}" for k in REPORTED),
-                flush=True)
+            print(f"{level:>6} {name:>13}: " + ", ".join(f"{k} {shown(results[level][name][k], sep='±')}" for k in REPORTED),
+                  flush=True)
         if "greedy" in per_policy:
             for base in (p for p in per_policy if p != "greedy"):
                 diff = {k: dict(zip(("mean", "ci95", "n"), mean_ci95(per_policy["greedy"][k] - per_policy[base].get(k, nan))))
@@ -148,8 +153,7 @@ def main(cfg: DictConfig) -> None:
     for level, rows in results.items():
         lines.append(f"\n### {level}\n\n| policy | " + " | ".join(REPORTED) + " |\n|---|" + "---|" * len(REPORTED))
         for name, row in rows.items():
-            lines.append(f"| {name} | " + " | ".join(f"{row[k]['mean']:+.3f} ± {row[k]['ci95']:.3f} (n={row[k]['n']})"
-                                                   for k in REPORTED) + " |")
+            lines.append(f"| {name} | " + " | ".join(f"{shown(row[k])} (n={row[k]['n']})" for k in REPORTED) + " |")
     for name, text in (("results.json", json.dumps(results, indent=2)), ("results.md", "\n".join(lines) + "\n")):
         write_atomic(out / name, text)
     print("\n".join(lines))

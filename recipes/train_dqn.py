@@ -309,6 +309,7 @@ def train(cfg: DictConfig) -> dict:
         if cfg.threads:
             torch.set_num_threads(cfg.threads)
         bar = tqdm(total=total, initial=state["frames"], unit="frame", dynamic_ncols=True, disable=not cfg.logger.progress)
+        last_reward = "—"                  # no episode has ended yet in this process
         start, t_wait = time.perf_counter(), time.perf_counter()
         frames_at_start = state["frames"]
         with running(collector):
@@ -382,8 +383,9 @@ def train(cfg: DictConfig) -> dict:
                         state["next_checkpoint"] += int(cfg.checkpoint.interval_frames)
                     ckpt.save()
                 bar.update(n)
-                bar.set_postfix(eps=f"{egreedy.eps.item():.2f}", upd=state["updates"],
-                                R=f"{metrics.get('train/reward', float('nan')):+.2f}")
+                if "train/reward" in metrics and metrics["train/reward"] == metrics["train/reward"]:
+                    last_reward = f"{metrics['train/reward']:+.2f}"     # the last batch in which episodes ended
+                bar.set_postfix(eps=f"{egreedy.eps.item():.2f}", upd=state["updates"], R=last_reward)
                 t_wait = time.perf_counter()
         bar.close()
     if state["frames"] >= total:    # finished: the last checkpoint holds the buffer; free its working copy

@@ -315,3 +315,16 @@ def test_export_overwrite_replaces_only_an_earlier_export(tmp_path):
     with pytest.raises(FileExistsError, match="not an earlier export"):
         check_export_target(run, earlier, overwrite=True)
     assert (tmp_path / "X" / "notes.txt").exists() and run.exists()
+
+
+def test_evaluate_policy_shows_a_mean_alone_where_one_episode_has_no_interval():
+    import torch
+    from conftest import load_recipe
+
+    from mqa_rl.evaluation.episode_metrics import mean_ci95
+
+    shown = load_recipe("evaluate_policy").shown
+    one = dict(zip(("mean", "ci95", "n"), mean_ci95(torch.tensor([0.25]))))
+    assert shown(one) == "+0.250" and "nan" not in shown(one)
+    many = dict(zip(("mean", "ci95", "n"), mean_ci95(torch.tensor([0.0, 0.5, 1.0]))))
+    assert shown(many).startswith("+0.500 ± ")
