@@ -6,9 +6,10 @@
     python recipes/train_perception.py device=cuda train.batch_size=128 model.widths=[48,64,128,192]
 
 Selects by the counting rule itself, on whole held-out pretraining scenes: the share of (frame, class
-in the scene) pairs whose vote-cluster count equals the number of objects with ≥ 20 visible pixels;
-at the end it chooses the counting settings (vote radius, suppression window, probability floor,
-mass threshold) on those scenes too and writes them into the file (``calibrate_only=true``: only
+in the scene) pairs whose count (vote clusters or density, whichever is better) equals the number of
+objects with ≥ 20 visible pixels; at the end it chooses the readout and its counting settings (vote
+radius, suppression window, probability floor, mass threshold; the density's rounding point) on
+those scenes too and writes them into the file (``calibrate_only=true``: only
 that, for a run stopped early).
 Writes ``out_dir/perception.pt`` (the best; ``mqa_rl.modules.perception.load_perception``),
 ``checkpoints/`` (atomic, for resume=true), ``csv/`` + ``wandb/`` logs, ``config.yaml``, ``summary.json``.
@@ -33,11 +34,12 @@ from tqdm import tqdm
 from mqa_rl import keys
 from mqa_rl.collectors.perception_frames import load_frames
 from mqa_rl.collectors.store import read_meta
-from mqa_rl.files import write_atomic
-from mqa_rl.losses.perception import PerceptionLoss
+from mqa_rl.files import load_versioned, write_atomic
+from mqa_rl.losses.perception import PerceptionLoss, countable_counts
 from mqa_rl.modules import vote_counting
 from mqa_rl.data.dataset import LEVELS
-from mqa_rl.modules.perception import CountingPerception, load_perception, save_perception
+from mqa_rl.modules.perception import (PERCEPTION_FORMAT, PERCEPTION_VERSION, CountingPerception, load_perception,
+                                       save_perception)
 from mqa_rl.modules.vqa_encoder import standardise
 from mqa_rl.training.model_checkpoint import ModelCheckpoint
 from mqa_rl.training.resume_guard import RESUMABLE, refuse_changed_config
@@ -45,11 +47,11 @@ from mqa_rl.training.run_logger import RunLogger, trim_scalars
 from mqa_rl.training.signals import exit_on_sigterm
 from mqa_rl.training.vqa_data import scene_split
 from mqa_rl.transforms.dihedral import DIHEDRAL, dihedral
-from mqa_rl.transforms.episode_stats import COUNTABLE_PX
 
 PERCEPTION_FILE = "perception.pt"
 # the counting settings tried on held-out pretraining scenes (vote_counting.DEFAULT_COUNTING: what they mean)
-CALIBRATION_GRID = {"radius": (2.5, 4.0), "nms": (5, 9), "min_prob": (0.05, 0.3), "min_px": (12, 16, 20, 28, 36)}
+CALIBRATION_GRID = {"radius": (2.5, 4.0), "nms": (5, 9), "min_prob": (0.05, 0.3), "min_px": (12, 16, 20, 28, 36),
+                    "round_at": (0.3, 0.4, 0.5, 0.6, 0.7)}
 COMMAND = "python recipes/train_perception.py"
 
 
@@ -67,10 +69,7 @@ def check_config(cfg: DictConfig) -> None:
 
 def true_counts(frames, num_classes: int) -> torch.Tensor:
     """int64 [N, K-1]: objects of each class with ≥ COUNTABLE_PX visible pixels (the perfect counter)."""
-    countable = frames.get(keys.FRAME_VISIBLE) >= COUNTABLE_PX
-    classes = frames.get(keys.OBJECT_CLASSES)
-    onehot = torch.nn.functional.one_hot(classes, num_classes)[..., 1:]              # [N, 50, K-1]
-    return (onehot * countable[..., None]).sum(1)
+    return countable_counts(frames.get(keys.FRAME_VISIBLE), frames.get(keys.OBJECT_CLASSES), num_classes).long()
 
 
 def accuracy_table(pred: torch.Tensor, frames) -> dict[str, float]:
@@ -88,30 +87,37 @@ def accuracy_table(pred: torch.Tensor, frames) -> dict[str, float]:
 
 @torch.no_grad()
 def predictions(model: CountingPerception, frames, device, batch_size: int = 64):
-    """(class probabilities, votes) of every frame, on the CPU."""
+    """(class probabilities, votes, density) of every frame, on the CPU."""
     model.eval()
     out = [model.predict(frames.get(keys.RGB)[s:s + batch_size].to(device)) for s in range(0, frames.shape[0], batch_size)]
     model.train()
-    return torch.cat([p.float().cpu() for p, _ in out]), torch.cat([v.float().cpu() for _, v in out])
+    return tuple(torch.cat([o[i].float().cpu() for o in out]) for i in range(3))
 
 
 def count_accuracy(model: CountingPerception, frames, device) -> dict[str, float]:
-    """``accuracy_table`` of the model's counts with its own counting settings."""
-    probs, votes = predictions(model, frames, device)
-    return accuracy_table(vote_counting.counts(probs, votes, model.cell_px, **model.counting), frames)
+    """``accuracy_table`` of the model's counts with its own counting settings, and (``val/density_*``)
+    of its density readout rounded to the nearest count."""
+    probs, votes, density = predictions(model, frames, device)
+    out = accuracy_table(vote_counting.counts(probs, votes, density, model.cell_px, **model.counting), frames)
+    dens = accuracy_table(vote_counting.density_counts(vote_counting.expected_counts(probs, density)), frames)
+    return {**out, **{k.replace("val/", "val/density_"): v for k, v in dens.items()}}
 
 
 def calibrate_counting(model: CountingPerception, frames, device) -> tuple[dict, list[dict]]:
     """The counting settings (``CALIBRATION_GRID``) under which the model counts the most (frame, class present)
     pairs of ``frames`` (held-out pretraining scenes) right, and every setting's accuracy."""
-    probs, votes = predictions(model, frames, device)
+    probs, votes, density = predictions(model, frames, device)
     tried = []
     grid = CALIBRATION_GRID
     for radius, nms, min_prob in itertools.product(grid["radius"], grid["nms"], grid["min_prob"]):
         masses = vote_counting.clusters(probs, votes, model.cell_px, radius=radius, nms=nms, min_prob=min_prob)
         for min_px in grid["min_px"]:
-            setting = {"radius": radius, "nms": nms, "min_prob": min_prob, "min_px": min_px}
+            setting = {**model.counting, "radius": radius, "nms": nms, "min_prob": min_prob, "min_px": min_px, "readout": "votes"}
             tried.append({**setting, **accuracy_table(vote_counting.counts_of(masses, min_px), frames)})
+    expected = vote_counting.expected_counts(probs, density)
+    for round_at in grid["round_at"]:
+        setting = {**model.counting, "readout": "density", "round_at": round_at}
+        tried.append({**setting, **accuracy_table(vote_counting.density_counts(expected, round_at), frames)})
     best = max(tried, key=lambda r: r["val/count_accuracy"])
     return {k: best[k] for k in vote_counting.DEFAULT_COUNTING}, tried
 
@@ -127,6 +133,17 @@ def calibrate_file(path: Path, val, device) -> dict:
     print(f"counting settings chosen on {val.shape[0]} held-out frames: {best} -> val count accuracy "
           f"{after['val/count_accuracy']:.3f} (before: {meta.get('val', {}).get('val/count_accuracy', float('nan')):.3f})")
     return after
+
+
+def init_weights(model: CountingPerception, path: str) -> None:
+    """Start from a perception file's weights (same architecture); heads it lacks keep their initialisation."""
+    blob = load_versioned(path, PERCEPTION_FORMAT, PERCEPTION_VERSION, what="perception file (init_from)",
+                          hint="name a perception.pt of recipes/train_perception.py")
+    missing, unexpected = model.load_state_dict(blob["state_dict"], strict=False)
+    if unexpected or any(not k.startswith("density.") for k in missing):
+        raise ValueError(f"init_from={path} does not fit model.widths={list(model.widths)} "
+                         f"(missing {missing[:4]}, unexpected {unexpected[:4]}): match the architecture it was trained with")
+    print(f"started from {path} (new heads: {sorted({k.split('.')[0] for k in missing}) or 'none'})")
 
 
 def augment(rgb: torch.Tensor, omap: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -174,6 +191,7 @@ def train(cfg: DictConfig) -> dict:
         train_set = train_set[keep.sort().values]
         n_train = train_set.shape[0]
     rgb_all, omap_all, cls_all = train_set.get(keys.RGB), train_set.get(keys.OBJECT_MAP), train_set.get(keys.OBJECT_CLASSES)
+    vis_all = train_set.get(keys.FRAME_VISIBLE)
     print(f"{n_train} training frames, {val.shape[0]} validation frames ({int(val_mask.sum())} held out) "
           f"from {len(cfg.frames.stores)} store(s)", flush=True)
 
@@ -181,7 +199,9 @@ def train(cfg: DictConfig) -> dict:
         return calibrate_file(out / PERCEPTION_FILE, val, device)
 
     model = CountingPerception(num_classes, tuple(cfg.model.widths), int(cfg.model.image_size)).to(device)
-    loss = PerceptionLoss(model, vote_weight=cfg.train.vote_weight)
+    if cfg.init_from:
+        init_weights(model, cfg.init_from)
+    loss = PerceptionLoss(model, vote_weight=cfg.train.vote_weight, density_weight=cfg.train.density_weight)
     optim = torch.optim.AdamW(model.parameters(), lr=cfg.train.lr, weight_decay=cfg.train.weight_decay)
     steps = int(cfg.train.steps)
     warm = int(cfg.train.warmup_steps)
@@ -222,10 +242,11 @@ def train(cfg: DictConfig) -> dict:
             rgb, omap = rgb_all[idx], omap_all[idx]
             if cfg.train.augment:
                 rgb, omap = augment(rgb, omap)
-            batch = {keys.OBJECT_MAP: omap.to(device), keys.OBJECT_CLASSES: cls_all[idx].to(device)}
+            batch = {keys.OBJECT_MAP: omap.to(device), keys.OBJECT_CLASSES: cls_all[idx].to(device),
+                     keys.FRAME_VISIBLE: vis_all[idx].to(device)}
             td = loss(TensorDict(batch, batch_size=[len(idx)]), standardise(rgb.to(device), model.image_size))
             optim.zero_grad()
-            (td["loss_class"] + td["loss_votes"]).backward()
+            loss.total(td).backward()
             torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.train.max_grad_norm)
             optim.step()
             schedule.step()
@@ -241,12 +262,14 @@ def train(cfg: DictConfig) -> dict:
                 metrics["train/lr"] = optim.param_groups[0]["lr"]
                 metrics.update(count_accuracy(model, val, device))
                 window, t_window = {}, time.perf_counter()
-                if metrics["val/count_accuracy"] > state["best"]:
-                    state["best"], state["best_step"] = metrics["val/count_accuracy"], step
+                score = max(metrics["val/count_accuracy"], metrics["val/density_count_accuracy"])   # either readout
+                if score > state["best"]:
+                    state["best"], state["best_step"] = score, step
                     save_perception(model, out / PERCEPTION_FILE,
                                     {**meta, "step": step, "val": metrics, "train_seconds": round(state["train_seconds"], 1)})
                 logger.log_metrics(metrics, step=step)
-                bar.set_postfix(loss=f"{metrics['train/loss_class']:.3f}", count=f"{metrics['val/count_accuracy']:.3f}")
+                bar.set_postfix(loss=f"{metrics['train/loss_class']:.3f}", votes=f"{metrics['val/count_accuracy']:.3f}",
+                                density=f"{metrics['val/density_count_accuracy']:.3f}")
             if step % cfg.checkpoint.interval_steps == 0 or step == steps:
                 ckpt.save(step)
     finally:

@@ -9,7 +9,7 @@ from tensordict import TensorDict
 from mqa_rl import keys
 from mqa_rl.collectors.perception_frames import check_disjoint, scene_fingerprint
 from mqa_rl.collectors.store import load_records
-from mqa_rl.losses.perception import PerceptionLoss, perception_targets
+from mqa_rl.losses.perception import PerceptionLoss, countable_counts, perception_targets
 from mqa_rl.modules import vote_counting
 from mqa_rl.modules.perception import CountingPerception, load_perception, save_perception
 from mqa_rl.modules.vqa import VQAModel, load_vqa, save_vqa
@@ -36,42 +36,56 @@ def synthetic_frame():
 
 def test_perfect_class_fractions_and_votes_count_instances_not_blobs():
     omap, classes, visible = synthetic_frame()
-    frac, offsets, _ = perception_targets(omap[None], classes[None], K, 56)
+    frac, offsets, _, density = perception_targets(omap[None], classes[None], visible[None], K, 56)
     assert torch.allclose(frac.sum(1), torch.ones(1, 56, 56))
     # the class fractions hold each class's visible area: 16 px of the render per output cell
     area3 = frac[0, 3].sum() * 16
     assert area3 == pytest.approx(float(visible[[0, 1, 4]].sum()), rel=1e-5)
-    counted = vote_counting.counts(frac, offsets, 16.0)[0]
     truth = {c: int(((classes == c) & (visible >= COUNTABLE_PX)).sum()) for c in range(1, K)}
-    assert counted.tolist() == [truth[c] for c in range(1, K)]
-    assert counted[2].item() == 2 and counted[4].item() == 1          # classes 3 and 5
+    for readout in vote_counting.READOUTS:
+        counted = vote_counting.counts(frac, offsets, density, 16.0, readout=readout)[0]
+        assert counted.tolist() == [truth[c] for c in range(1, K)], readout
+        assert counted[2].item() == 2 and counted[4].item() == 1, readout   # classes 3 and 5
+    with pytest.raises(ValueError, match="unknown readout"):
+        vote_counting.counts(frac, offsets, density, 16.0, readout="blobs")
+
+
+def test_the_density_holds_a_unit_mass_per_countable_object_only():
+    omap, classes, visible = synthetic_frame()
+    *_, density = perception_targets(omap[None], classes[None], visible[None], K, 56)
+    # four countable objects (the two halves of the cut one are one object); the 16-px one has no mass
+    assert float(density.sum()) == pytest.approx(4.0, rel=1e-5)
+    assert float(density[0, 0, 50, 50]) == 0.0                       # the tiny object's cell (100:102 at 112 px)
+    assert float(density[0, 0, 10, 8]) == pytest.approx(1 / 150)    # slot 1: 30 x 20 px at 112 = 150 cells
+    assert countable_counts(visible[None], classes[None], K)[0].tolist() == [0, 0, 2, 0, 1, 0, 1]
 
 
 def test_count_features_put_the_image_row_first_and_one_hot_the_count():
-    omap, classes, _ = synthetic_frame()
-    frac, offsets, _ = perception_targets(omap[None], classes[None], K, 56)
-    feats = vote_counting.count_features(frac, offsets, 16.0)
+    omap, classes, visible = synthetic_frame()
+    frac, offsets, _, density = perception_targets(omap[None], classes[None], visible[None], K, 56)
+    feats = vote_counting.count_features(frac, offsets, density, 16.0)
     assert feats.shape == (1, K, vote_counting.FEATURES)
     assert feats[0, 3, 2] == 1.0 and feats[0, 3, :vote_counting.MAX_COUNT + 1].sum() == 1.0
+    assert feats[0, 3, -1] == pytest.approx(2.0, abs=1e-4)          # the expected count read from the density
     assert feats[0, 0, 0] == pytest.approx(4 / 50)                   # 2 + 1 + 1 countable objects
     assert feats[0, 1, 0] == 1.0                                     # an absent class counts 0
 
 
 def test_perception_learns_a_few_frames():
     torch.manual_seed(0)
-    omap, classes, _ = synthetic_frame()
+    omap, classes, visible = synthetic_frame()
     model = CountingPerception(K, widths=(8, 8, 16, 16))
     loss = PerceptionLoss(model)
     rgb = torch.zeros(2, 3, 112, 112)
     rgb[:, 0] = omap.float() / 5.0 - 0.5          # each object its own shade of red
     rgb[:, 1] = (torch.tensor([0, 3, 3, 5, 7, 3])[omap.long()].float() / 7.0) - 0.5
-    batch = TensorDict({keys.OBJECT_MAP: omap.expand(2, -1, -1), keys.OBJECT_CLASSES: classes.expand(2, -1)},
-                       batch_size=[2])
+    batch = TensorDict({keys.OBJECT_MAP: omap.expand(2, -1, -1), keys.OBJECT_CLASSES: classes.expand(2, -1),
+                        keys.FRAME_VISIBLE: visible.expand(2, -1)}, batch_size=[2])
     optim = torch.optim.Adam(model.parameters(), lr=3e-3)
     first = None
     for _ in range(60):
         td = loss(batch, rgb)
-        total = td["loss_class"] + td["loss_votes"]
+        total = loss.total(td)
         first = float(total) if first is None else first
         optim.zero_grad()
         total.backward()

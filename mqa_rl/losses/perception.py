@@ -3,7 +3,11 @@
 * class: each output cell's class *fractions* (of its input pixels) as a soft target of a
   cross-entropy, so that probability × the cell's pixels is the visible area the cell holds;
 * votes: for every cell showing an object, the offset from the cell to the centre of the visible
-  pixels of the object covering most of it, weighted by that share (smooth L1, in cells), as Panoptic-DeepLab regresses instance centres.
+  pixels of the object covering most of it, weighted by that share (smooth L1, in cells), as Panoptic-DeepLab regresses instance centres;
+* density: every countable object (≥ 20 visible px in the render) spreads a unit mass over its visible
+  cells (squared error summed over an image's cells), and each class's count read from it (density ×
+  class probability, summed) meets the perfect counter's count of that class (smooth L1): the
+  measured quantity itself is a loss term.
 """
 
 from __future__ import annotations
@@ -15,12 +19,22 @@ from torch import nn
 
 from mqa_rl import keys
 from mqa_rl.envs.sapien_bin import MAX_OBJECTS
+from mqa_rl.transforms.episode_stats import COUNTABLE_PX
 
 
-def perception_targets(object_map: torch.Tensor, object_classes: torch.Tensor, num_classes: int, out_size: int):
+def countable_counts(visible_area: torch.Tensor, object_classes: torch.Tensor, num_classes: int) -> torch.Tensor:
+    """float [B, K-1]: objects of each class (1 … K-1) with ≥ ``COUNTABLE_PX`` visible render pixels (the
+    perfect counter), from visible areas [B, 50] and slot classes [B, 50]."""
+    countable = (visible_area >= COUNTABLE_PX).float()
+    return torch.einsum("bn,bnk->bk", countable, F.one_hot(object_classes, num_classes).float())[:, 1:]
+
+
+def perception_targets(object_map: torch.Tensor, object_classes: torch.Tensor, visible_area: torch.Tensor,
+                       num_classes: int, out_size: int):
     """(class fractions [B, K, s, s], offsets [B, 2, s, s], vote weight [B, s, s]: the share of the
-    cell its main object covers) from object maps
-    uint8 [B, S, S] (0 = bin, 1 + slot) and slot classes int64 [B, 50]."""
+    cell its main object covers, density [B, 1, s, s]: the countable objects' unit masses over their
+    cells) from object maps uint8 [B, S, S] (0 = bin, 1 + slot), slot classes int64 [B, 50] and visible
+    render areas [B, 50]."""
     b, size = object_map.shape[0], object_map.shape[-1]
     pool = size // out_size
     omap = object_map.long()
@@ -40,29 +54,46 @@ def perception_targets(object_map: torch.Tensor, object_classes: torch.Tensor, n
     ty = torch.gather(cy, 1, owner.flatten(1)).view_as(share) - grid[:, None]
     tx = torch.gather(cx, 1, owner.flatten(1)).view_as(share) - grid[None, :]
     weight = share                                                                    # 0 where no object shows
-    return class_frac, torch.stack([ty, tx], 1), weight
+    countable = torch.cat([torch.zeros_like(visible_area[:, :1]), visible_area], 1) >= COUNTABLE_PX   # [B, 51]
+    unit = countable.float() * pool * pool / area.clamp_min(1.0)                      # mass per cell it fills
+    density = torch.einsum("bnyx,bn->byx", slot_frac, unit).unsqueeze(1)
+    return class_frac, torch.stack([ty, tx], 1), weight, density
 
 
 class PerceptionLoss(nn.Module):
-    """TensorDict [B] (``RGB`` standardised by the model, ``OBJECT_MAP``, ``OBJECT_CLASSES``) → losses and
-    the class accuracy of object cells. ``model``: a ``CountingPerception``."""
+    """TensorDict [B] (``OBJECT_MAP``, ``OBJECT_CLASSES``, ``FRAME_VISIBLE``) and the model's standardised
+    inputs → losses, the class accuracy of object cells and the density's count error. ``model``: a
+    ``CountingPerception``."""
 
-    def __init__(self, model, vote_weight: float = 0.5):
+    def __init__(self, model, vote_weight: float = 0.5, density_weight: float = 1.0):
         super().__init__()
         self.model = model
         self.vote_weight = float(vote_weight)
+        self.density_weight = float(density_weight)
 
     def forward(self, batch: TensorDict, inputs: torch.Tensor) -> TensorDict:
-        logits, votes = self.model(inputs)
-        frac, offsets, weight = perception_targets(batch.get(keys.OBJECT_MAP), batch.get(keys.OBJECT_CLASSES),
-                                                   self.model.num_classes, self.model.out_size)
+        logits, votes, density = self.model(inputs)
+        classes, visible = batch.get(keys.OBJECT_CLASSES), batch.get(keys.FRAME_VISIBLE).float()
+        frac, offsets, weight, target = perception_targets(batch.get(keys.OBJECT_MAP), classes, visible,
+                                                           self.model.num_classes, self.model.out_size)
         loss_class = -(frac * F.log_softmax(logits, 1)).sum(1).mean()
         vote_err = F.smooth_l1_loss(votes, offsets, reduction="none").sum(1)
         loss_votes = (vote_err * weight).sum() / weight.sum().clamp_min(1.0)
+        loss_map = (density - target).square().flatten(1).sum(1).mean()
+        expected = (logits.softmax(1)[:, 1:] * density).flatten(2).sum(-1)                  # [B, K-1]
+        count_err = F.smooth_l1_loss(expected, countable_counts(visible, classes, self.model.num_classes),
+                                     reduction="none")
+        loss_count = count_err.sum(1).mean()
         with torch.no_grad():
             fg = frac[:, 1:].sum(1) >= 0.5
             right = (logits.argmax(1) == frac.argmax(1)) & fg
             accuracy = right.sum() / fg.sum().clamp_min(1)
         return TensorDict({"loss_class": loss_class, "loss_votes": self.vote_weight * loss_votes,
+                           "loss_density": self.density_weight * (loss_map + loss_count),
                            "vote_error": (vote_err * weight).sum().detach() / weight.sum().clamp_min(1.0),
+                           "count_error": count_err.detach().sum(1).mean(),
                            "class_accuracy": accuracy}, batch_size=[])
+
+    def total(self, td: TensorDict) -> torch.Tensor:
+        """The sum the optimiser descends."""
+        return td["loss_class"] + td["loss_votes"] + td["loss_density"]

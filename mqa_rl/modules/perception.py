@@ -4,6 +4,8 @@
                                → decoder with skips → [B, W, 56, 56]
                                → class logits [B, K, 56, 56]   (K = 1 + dataset classes; 0 = bin)
                                → centre votes  [B, 2, 56, 56]   (offset of each cell to its object's centre)
+                               → density       [B, 1, 56, 56]   (each countable object's unit mass, spread
+                                                                 over its visible cells)
 
 Counting needs instances, not class areas: a perfect class mask split into connected components
 counts 0.80 / 0.61 / 0.48 of the test questions right where a perfect instance counter gets 0.96 /
@@ -12,7 +14,11 @@ class merge. So every cell also *votes* for the centre of the visible part of it
 Panoptic-DeepLab's offset head does): the pieces of one object vote for one place, two touching
 objects for two. ``mqa_rl.modules.vote_counting`` turns class probabilities and votes into clusters
 whose mass is the object's visible area in 224-px pixels, which is the perfect counter's own rule
-(≥ 20 visible px). The class head is trained on each cell's class *fractions*, so that a cell's
+(≥ 20 visible px). A third head reads counts without clustering: a density whose mass per countable
+object is one (spread over the object's visible cells, as crowd counting spreads a person), so that a
+class's count is the sum of density × class probability over the image.
+
+The class head is trained on each cell's class *fractions*, so that a cell's
 probability times its 16 px is the visible area it holds, even for objects of a few cells.
 
 A perception file (``save_perception`` / ``load_perception``) holds the weights, the architecture and
@@ -32,8 +38,9 @@ from mqa_rl.modules import vote_counting
 from mqa_rl.modules.vqa_encoder import standardise
 
 PERCEPTION_FORMAT = "mqa_rl.perception"
-PERCEPTION_VERSION = 1
+PERCEPTION_VERSION = 2        # 2: the density head
 RENDER_SIZE = 224          # the env's image size: areas and the counting rule are in its pixels
+DENSITY_BIAS = -5.0        # softplus(-5) ≈ 0.007 per cell: ~20 objects over 56 × 56 cells at the start
 
 
 def _block(cin: int, cout: int, stride: int) -> nn.Sequential:
@@ -43,7 +50,8 @@ def _block(cin: int, cout: int, stride: int) -> nn.Sequential:
 
 
 class CountingPerception(nn.Module):
-    """Standardised rgb [B, 3, S, S] → (class logits [B, K, S/2, S/2], votes [B, 2, S/2, S/2]).
+    """Standardised rgb [B, 3, S, S] → (class logits [B, K, S/2, S/2], votes [B, 2, S/2, S/2],
+    density [B, 1, S/2, S/2] ≥ 0).
 
     ``widths``: channels at strides 2, 4, 8, 16 (the deepest sees ~100 px of the 112-px input: the
     whole of the largest object). Votes are in output cells, relative to the cell's centre."""
@@ -68,6 +76,8 @@ class CountingPerception(nn.Module):
         self.up1 = _block(w2 + w1, w1, 1)
         self.classes = nn.Conv2d(w1, self.num_classes, 1)
         self.votes = nn.Conv2d(w1, 2, 1)
+        self.density = nn.Conv2d(w1, 1, 1)
+        nn.init.constant_(self.density.bias, DENSITY_BIAS)
 
     @property
     def out_size(self) -> int:
@@ -78,7 +88,7 @@ class CountingPerception(nn.Module):
         """Pixels of the 224-px render one output cell covers (16 at 112 px in, 56 out)."""
         return (RENDER_SIZE / self.out_size) ** 2
 
-    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         skips = []
         for stage in self.down:
             x = stage(x)
@@ -87,23 +97,23 @@ class CountingPerception(nn.Module):
         for up, skip in ((self.up3, s3), (self.up2, s2), (self.up1, s1)):
             x = F.interpolate(x, size=skip.shape[-2:], mode="bilinear", align_corners=False)
             x = up(torch.cat([x, skip], 1))
-        return self.classes(x), self.votes(x)
+        return self.classes(x), self.votes(x), F.softplus(self.density(x))
 
-    def predict(self, rgb: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """uint8 rgb [B, 3, H, W] → (class probabilities [B, K, s, s], votes [B, 2, s, s])."""
-        logits, votes = self(standardise(rgb, self.image_size))
-        return logits.softmax(1), votes
+    def predict(self, rgb: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """uint8 rgb [B, 3, H, W] → (class probabilities [B, K, s, s], votes [B, 2, s, s], density [B, 1, s, s])."""
+        logits, votes, density = self(standardise(rgb, self.image_size))
+        return logits.softmax(1), votes, density
 
     def count_features(self, rgb: torch.Tensor) -> torch.Tensor:
         """uint8 rgb [B, 3, H, W] → the VQA's per-class count features [B, K, F] (``vote_counting``), with
         this perception's own counting settings."""
-        probs, votes = self.predict(rgb)
-        return vote_counting.count_features(probs.float().cpu(), votes.float().cpu(), self.cell_px, **self.counting)
+        probs, votes, density = (t.float().cpu() for t in self.predict(rgb))
+        return vote_counting.count_features(probs, votes, density, self.cell_px, **self.counting)
 
     def counts(self, rgb: torch.Tensor) -> torch.Tensor:
         """uint8 rgb [B, 3, H, W] → int64 [B, K-1]: the objects of each class (1 … K-1) it counts."""
-        probs, votes = self.predict(rgb)
-        return vote_counting.counts(probs.float().cpu(), votes.float().cpu(), self.cell_px, **self.counting)
+        probs, votes, density = (t.float().cpu() for t in self.predict(rgb))
+        return vote_counting.counts(probs, votes, density, self.cell_px, **self.counting)
 
     def config(self) -> dict:
         return {"num_classes": self.num_classes, "widths": list(self.widths), "image_size": self.image_size,

@@ -1,4 +1,4 @@
-"""Counting instances from the perception's class probabilities and centre votes.
+"""Counting instances from the perception's class probabilities and centre votes, or its density.
 
 For every class, each output cell the class wins (its most probable class) casts its expected visible
 area (class probability × the 224-px pixels the cell covers) at the place it votes for (cell centre +
@@ -11,10 +11,14 @@ candidate objects, every vote joins its nearest peak within ``radius`` cells, an
 is then the visible area of one object in the perfect counter's pixels. An object counts when its
 mass reaches ``min_px`` (20: ``COUNTABLE_PX``, the perfect counter's rule).
 
-``count_features`` gives, per class, what the VQA head reads: the count (one-hot, 0 … ``MAX_COUNT``,
-the last bin meaning "that many or more"), the ``TOP`` largest cluster masses (log-scaled, so that a
-head can set its own threshold) and the class's visible area; plus one image-wide entry (row 0), the
-number of counted objects of every class (how crowded the bin looks: a difficulty signal read from the image).
+The density readout (``readout="density"``) needs no clusters: a class's expected count is the sum over
+cells of density × class probability, and the count rounds it up from ``round_at`` (0.5: to the nearest).
+
+``count_features`` gives, per class, what the VQA head reads: the count under the readout (one-hot,
+0 … ``MAX_COUNT``, the last bin meaning "that many or more"), the ``TOP`` largest cluster masses
+(log-scaled, so that a head can set its own threshold), the class's visible area and its expected count
+from the density; plus one image-wide entry (row 0), the number of counted objects of every class (how
+crowded the bin looks: a difficulty signal read from the image).
 """
 
 from __future__ import annotations
@@ -28,14 +32,16 @@ from mqa_rl.transforms.episode_stats import COUNTABLE_PX
 
 MAX_COUNT = 6              # count one-hot bins 0 … 6 (6 = six or more)
 TOP = 6                    # largest cluster masses kept per class
-FEATURES = (MAX_COUNT + 1) + TOP + 1          # per class: count one-hot, top masses, area
+FEATURES = (MAX_COUNT + 1) + TOP + 2          # per class: count one-hot, top masses, area, expected count
 PEAK_FLOOR = 4.0           # a peak needs this much smoothed vote mass (px) to be a candidate at all
 # How clusters are formed and counted; a perception file carries its own, chosen on held-out pretraining
 # scenes (recipes/train_perception.py calibrates them): radius (cells) within which a vote joins a peak,
 # the non-maximum suppression window (cells), the class probability below which a cell does not vote,
 # and the cluster mass (px) from which an object counts (the rule's 20 px, or what the predicted masses
-# need to meet it).
-DEFAULT_COUNTING = {"radius": 2.5, "nms": 5, "min_prob": 0.05, "min_px": COUNTABLE_PX}
+# need to meet it); and which readout counts (``READOUTS``) with the density's rounding point.
+READOUTS = ("votes", "density")
+DEFAULT_COUNTING = {"radius": 2.5, "nms": 5, "min_prob": 0.05, "min_px": COUNTABLE_PX, "readout": "votes", "round_at": 0.5}
+CLUSTER_SETTINGS = ("radius", "nms", "min_prob")
 
 
 def clusters(probs: torch.Tensor, votes: torch.Tensor, cell_px: float, *, radius: float = DEFAULT_COUNTING["radius"],
@@ -72,9 +78,26 @@ def clusters(probs: torch.Tensor, votes: torch.Tensor, cell_px: float, *, radius
     return out
 
 
-def counts(probs: torch.Tensor, votes: torch.Tensor, cell_px: float, min_px: float = COUNTABLE_PX, **kwargs) -> torch.Tensor:
-    """int64 [B, K-1]: objects of each class (classes 1 … K-1) whose cluster holds ≥ ``min_px`` visible px."""
-    return counts_of(clusters(probs, votes, cell_px, **kwargs), min_px)
+def expected_counts(probs: torch.Tensor, density: torch.Tensor) -> torch.Tensor:
+    """float [B, K-1]: the density's mass of each class (1 … K-1): Σ over cells of density × class probability."""
+    return (probs[:, 1:] * density).flatten(2).sum(-1)
+
+
+def density_counts(expected: torch.Tensor, round_at: float = DEFAULT_COUNTING["round_at"]) -> torch.Tensor:
+    """int64 counts from ``expected_counts``: n counts from an expected n - 1 + ``round_at``."""
+    return torch.floor(expected + 1.0 - round_at).clamp_min(0).long()
+
+
+def counts(probs: torch.Tensor, votes: torch.Tensor, density: torch.Tensor, cell_px: float, *,
+           readout: str = DEFAULT_COUNTING["readout"], min_px: float = COUNTABLE_PX,
+           round_at: float = DEFAULT_COUNTING["round_at"], **cluster_settings) -> torch.Tensor:
+    """int64 [B, K-1]: objects of each class (classes 1 … K-1) under ``readout``: vote clusters holding
+    ≥ ``min_px`` visible px, or the rounded density mass."""
+    if readout == "density":
+        return density_counts(expected_counts(probs, density), round_at)
+    if readout != "votes":
+        raise ValueError(f"unknown readout {readout!r}; known: {list(READOUTS)}")
+    return counts_of(clusters(probs, votes, cell_px, **cluster_settings), min_px)
 
 
 def counts_of(masses, min_px: float = COUNTABLE_PX) -> torch.Tensor:
@@ -82,29 +105,38 @@ def counts_of(masses, min_px: float = COUNTABLE_PX) -> torch.Tensor:
     return torch.tensor([[int((m >= min_px).sum()) for m in per_class] for per_class in masses], dtype=torch.int64)
 
 
-def count_features(probs: torch.Tensor, votes: torch.Tensor, cell_px: float, min_px: float = COUNTABLE_PX,
-                   **kwargs) -> torch.Tensor:
+def count_features(probs: torch.Tensor, votes: torch.Tensor, density: torch.Tensor, cell_px: float, *,
+                   readout: str = DEFAULT_COUNTING["readout"], min_px: float = COUNTABLE_PX,
+                   round_at: float = DEFAULT_COUNTING["round_at"], **cluster_settings) -> torch.Tensor:
     """float [B, K, FEATURES] of the perception's output: ``features_from_masses`` of its vote clusters,
-    with each class's area the sum of its probabilities (px)."""
+    with each class's area the sum of its probabilities (px), its expected count from the density, and
+    the count under ``readout``."""
     area = probs[:, 1:].flatten(2).sum(-1) * cell_px                               # [B, K-1] px
-    return features_from_masses(clusters(probs, votes, cell_px, **kwargs), area, min_px)
+    expected = expected_counts(probs, density)
+    masses = clusters(probs, votes, cell_px, **cluster_settings)
+    counted = density_counts(expected, round_at) if readout == "density" else counts_of(masses, min_px)
+    return features_from_masses(masses, area, min_px, expected=expected, counted=counted)
 
 
-def features_from_masses(masses, area: torch.Tensor, min_px: float = COUNTABLE_PX) -> torch.Tensor:
-    """float [B, K, FEATURES] from per image and class (1 … K-1) the objects' visible masses (px) and the
-    classes' areas [B, K-1]: row c ≥ 1 the class c (count one-hot, top masses, area), aligned with the
-    class channels; row 0 the image-wide entry: the number of counted objects of every class (/ 50, first
-    entry). The true masses (every object's visible pixels) give what a perfect perception would."""
+def features_from_masses(masses, area: torch.Tensor, min_px: float = COUNTABLE_PX, *,
+                         expected: torch.Tensor | None = None, counted: torch.Tensor | None = None) -> torch.Tensor:
+    """float [B, K, FEATURES] from per image and class (1 … K-1) the objects' visible masses (px), the
+    classes' areas [B, K-1] and, optionally, expected counts and counts [B, K-1] (default: the masses
+    ≥ ``min_px``): row c ≥ 1 the class c (count one-hot, top masses, area, expected count), aligned with
+    the class channels; row 0 the image-wide entry: the number of counted objects of every class (/ 50,
+    first entry). The true masses (every object's visible pixels) give what a perfect perception would."""
     b, k = area.shape[0], area.shape[1] + 1
+    if counted is None:
+        counted = counts_of(masses, min_px)
+    if expected is None:
+        expected = counted.float()
     feats = torch.zeros(b, k, FEATURES, dtype=torch.float32)
     for i, per_class in enumerate(masses):
-        total = 0
         for c, m in enumerate(per_class):
-            n = int((m >= min_px).sum())
-            total += n
-            feats[i, c + 1, min(n, MAX_COUNT)] = 1.0
+            feats[i, c + 1, min(int(counted[i, c]), MAX_COUNT)] = 1.0
             top = torch.sort(m, descending=True).values[:TOP]
             feats[i, c + 1, MAX_COUNT + 1:MAX_COUNT + 1 + len(top)] = torch.log1p(top / min_px).float()
-            feats[i, c + 1, -1] = math.log1p(float(area[i, c]) / min_px)
-        feats[i, 0, 0] = total / 50.0
+            feats[i, c + 1, -2] = math.log1p(float(area[i, c]) / min_px)
+            feats[i, c + 1, -1] = float(expected[i, c])
+        feats[i, 0, 0] = float(counted[i].sum()) / 50.0
     return feats
