@@ -46,6 +46,7 @@ from mqa_rl.modules.pretrained_recognition import load_recognition
 from mqa_rl.modules.push_policy import RETIRED_OPTIONS, make_explorer, make_push_qnet, make_q_actor
 from mqa_rl.training.checkpoint import TrainingCheckpoint
 from mqa_rl.training.resume_guard import RESUMABLE, flatten, refuse_changed_config
+from mqa_rl.training.run_dir import RunLock, positive_ints, refuse_unresumable
 from mqa_rl.training.run_logger import RunLogger, trim_scalars
 from mqa_rl.training.signals import exit_on_sigterm
 from mqa_rl.verified_checkpoint import newest_checkpoint, restore_verified
@@ -56,11 +57,12 @@ from mqa_rl.transforms.mqa_env import make_mqa_env
 def check_config(cfg: DictConfig) -> None:
     """Errors that would otherwise surface minutes later, each saying what to change."""
     col, buf, loss = cfg.collector, cfg.buffer, cfg.loss
-    if col.total_frames <= 0 or col.total_frames % col.frames_per_batch:
+    positive_ints(cfg, "collector.frames_per_batch", "collector.total_frames", "buffer.size", "buffer.batch_size",
+                  "eval.episodes", "eval.interval_frames", "checkpoint.interval_frames", "checkpoint.keep_last")
+    positive_ints(cfg, "loss.updates_per_batch", "collector.annealing_frames", minimum=0)
+    if col.total_frames % col.frames_per_batch:
         raise ValueError(f"collector.total_frames={col.total_frames} must be a positive multiple of "
                          f"collector.frames_per_batch={col.frames_per_batch}")
-    if loss.updates_per_batch < 0:
-        raise ValueError(f"loss.updates_per_batch={loss.updates_per_batch} must be ≥ 0")
     if cfg.loss.get("target_map_weight", 0) > 0 and not cfg.model.get("class_map"):
         raise ValueError(f"loss.target_map_weight={cfg.loss.target_map_weight} needs model.class_map=true "
                          f"(the target map it trains)")
@@ -192,8 +194,15 @@ def evaluate(env, actor, cfg: DictConfig, logger: RunLogger, step: int) -> dict[
 def train(cfg: DictConfig) -> dict:
     check_config(cfg)
     out = Path(cfg.out_dir)
+    created = not out.exists()                   # a refused init_from removes only a folder this run made
+    with RunLock(out, "train_dqn.py"):
+        return _train(cfg, out, created)
+
+
+def _train(cfg: DictConfig, out: Path, created: bool) -> dict:
     # a new run may start from another's checkpoint; a run that has its own continues from that (resume=true)
     fresh = newest_checkpoint(CheckpointRotation(out / "checkpoints", keep_last=1)) is None
+    refuse_unresumable(out, not fresh, bool(cfg.resume))
     init = initial_checkpoint(cfg.init_from) if cfg.get("init_from") and fresh else None
     torch.manual_seed(cfg.seed)
     np.random.seed(cfg.seed)
@@ -247,7 +256,6 @@ def train(cfg: DictConfig) -> dict:
 
     params = [p for p in loss.parameters() if p.requires_grad]
     optim = torch.optim.Adam(params, lr=cfg.optim.lr, weight_decay=cfg.optim.weight_decay)
-    created = not out.exists()
     out.mkdir(parents=True, exist_ok=True)       # the first thing written
     scratch = Path(buf.scratch_dir) if buf.scratch_dir else out / "replay_scratch"
     if scratch.exists():                     # a previous (killed) process's memmap files: not a checkpoint
@@ -260,14 +268,13 @@ def train(cfg: DictConfig) -> dict:
     ckpt = TrainingCheckpoint(out / "checkpoints", actor=actor, loss=loss, optimizer=optim, replay_buffer=rb,
                               egreedy=egreedy, target_updater=target_updater, beta_counter=counter, state=state,
                               keep_last=cfg.checkpoint.keep_last)
-    if ckpt.latest() is not None:
-        if not cfg.resume:
-            raise FileExistsError(f"{out} already holds checkpoints ({ckpt.latest().name}): pass resume=true to "
-                                  f"continue that run, or choose another out_dir")
+    if ckpt.latest() is not None:                  # resume=true (refuse_unresumable checked it)
         config = OmegaConf.to_container(cfg, resolve=True)
         refuse_changed_config(out / "config.yaml", config, cfg.get("resume_allow_changes", False),
                               resumable(out / "config.yaml", config))
         path = ckpt.load()
+        for group in optim.param_groups:                   # resume_allow_changes: the new settings take effect
+            group["lr"], group["weight_decay"] = float(cfg.optim.lr), float(cfg.optim.weight_decay)
         state.setdefault("demo_pretrain_updates", 0)       # checkpoints older than the pre-training counters
         state.setdefault("demo_pretrain_seconds", 0.0)
         dropped = (trim_scalars(out / "csv", state["frames"], exclude="demo_pretrain")         # stepped by frames
@@ -371,6 +378,7 @@ def train(cfg: DictConfig) -> dict:
                 state["train_seconds"] += time.perf_counter() - t_wait
                 metrics["time/loop_env_steps_per_s"] = (state["frames"] - frames_at_start) / (time.perf_counter() - start)
                 metrics["train/updates"] = state["updates"]
+                metrics["train/lr"] = optim.param_groups[0]["lr"]
                 metrics["train/episodes"] = state["episodes"]
 
                 if state["frames"] >= state["next_eval"] or state["frames"] >= total:

@@ -328,3 +328,53 @@ def test_evaluate_policy_shows_a_mean_alone_where_one_episode_has_no_interval():
     assert shown(one) == "+0.250" and "nan" not in shown(one)
     many = dict(zip(("mean", "ci95", "n"), mean_ci95(torch.tensor([0.0, 0.5, 1.0]))))
     assert shown(many).startswith("+0.500 ± ")
+
+
+def test_train_dqn_refuses_bad_counts_a_second_writer_and_a_dead_runs_folder_before_writing(small_dataset_dir, tmp_path):
+    from conftest import compose_recipe_config, load_recipe
+
+    from mqa_rl.training.run_dir import RunLock
+
+    train_dqn = load_recipe("train_dqn")
+
+    def cfg(out, *more):
+        return compose_recipe_config("train_dqn", ["profile=smoke", f"dataset={small_dataset_dir}", f"out_dir={out}",
+                                                   "threads=1", *more])
+
+    for override, key in (("collector.frames_per_batch=0", "collector.frames_per_batch"),
+                          ("collector.frames_per_batch=-8", "collector.frames_per_batch"),
+                          ("loss.updates_per_batch=1.5", "loss.updates_per_batch"),
+                          ("eval.episodes=0", "eval.episodes"), ("buffer.batch_size=4.5", "buffer.batch_size")):
+        with pytest.raises(ValueError, match=key):
+            train_dqn.train(cfg(tmp_path / "bad", override))
+        assert not (tmp_path / "bad").exists()
+    dead = tmp_path / "dead"                                  # killed before its first checkpoint, or another recipe's
+    (dead / "csv").mkdir(parents=True)
+    (dead / "config.yaml").write_text("evaluate_policy: true\n")
+    for resume in ("false", "true"):
+        with pytest.raises(FileExistsError, match="no checkpoint"):
+            train_dqn.train(cfg(dead, f"resume={resume}"))
+    assert (dead / "config.yaml").read_text() == "evaluate_policy: true\n"        # not overwritten
+    with RunLock(tmp_path / "busy", "train_dqn.py"):
+        with pytest.raises(RuntimeError, match="another train_dqn.py run"):
+            train_dqn.train(cfg(tmp_path / "busy"))
+
+
+@pytest.mark.slow
+def test_train_dqn_resume_allow_changes_trains_at_the_new_rate(small_dataset_dir, tmp_path):
+    from conftest import compose_recipe_config, load_recipe
+
+    train_dqn = load_recipe("train_dqn")
+
+    def cfg(*more):
+        return compose_recipe_config("train_dqn", ["profile=smoke", f"dataset={small_dataset_dir}",
+                                                   f"out_dir={tmp_path / 'run'}", "threads=1", "eval.interval_frames=16",
+                                                   "checkpoint.interval_frames=16", *more])
+
+    train_dqn.train(cfg("collector.total_frames=16"))
+    with pytest.raises(ValueError, match="optim.lr"):
+        train_dqn.train(cfg("collector.total_frames=32", "resume=true", "optim.lr=0.01"))
+    train_dqn.train(cfg("collector.total_frames=32", "resume=true", "optim.lr=0.01", "resume_allow_changes=true"))
+    with open(tmp_path / "run" / "csv" / "scalars" / "train" / "lr.csv") as f:
+        rates = [float(row[1]) for row in csv.reader(f)]
+    assert rates[-1] == pytest.approx(0.01) and rates[0] != pytest.approx(0.01)

@@ -14,28 +14,32 @@ LOCK_NAME = ".lock"
 RUN_FILES = ("config.yaml", "csv", "summary.json")
 
 
-def positive_ints(cfg: DictConfig, *names: str) -> None:
-    """Raise ``ValueError`` naming the first dotted key of ``cfg`` that is not a positive integer (a
+def positive_ints(cfg: DictConfig, *names: str, minimum: int = 1) -> None:
+    """Raise ``ValueError`` naming the first dotted key of ``cfg`` that is not an integer ≥ ``minimum`` (a
     bool, 7.5, NaN, 0 and -8 are refused), before a recipe writes or computes anything."""
     for name in names:
         value = OmegaConf.select(cfg, name)
-        if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value <= 0:
-            raise ValueError(f"{name}={value!r} must be a positive integer")
+        if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < minimum:
+            raise ValueError(f"{name}={value!r} must be " + ("a positive integer" if minimum == 1
+                                                              else f"a whole number ≥ {minimum}"))
 
 
 class RunLock:
     """An exclusive ``flock`` on ``out_dir/.lock`` while a run writes there: a second run in the same
     folder is refused at once instead of doubling every log row and overwriting checkpoints. The
-    kernel drops the lock when the process dies, so a killed run never blocks its resume."""
+    kernel drops the lock when the process dies, so a killed run never blocks its resume. A folder the
+    lock made and the run left empty (refused before writing anything) goes again."""
 
     def __init__(self, out_dir: str | Path, recipe: str):
         self.path = Path(out_dir) / LOCK_NAME
         self.recipe = recipe
         self._file = None
+        self._made_folder = False
 
     def __enter__(self) -> "RunLock":
         if self.path.parent.exists() and not self.path.parent.is_dir():
             raise NotADirectoryError(f"out_dir={self.path.parent} is a file: choose a folder")
+        self._made_folder = not self.path.parent.exists()
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._file = open(self.path, "w")
         try:
@@ -47,6 +51,10 @@ class RunLock:
         return self
 
     def __exit__(self, *exc) -> None:
+        folder = self.path.parent
+        if self._made_folder and folder.is_dir() and [p.name for p in folder.iterdir()] == [LOCK_NAME]:
+            self.path.unlink()
+            folder.rmdir()
         fcntl.flock(self._file, fcntl.LOCK_UN)
         self._file.close()
 
