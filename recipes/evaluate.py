@@ -153,6 +153,9 @@ def calibrated_counter(train_store: Path, test: TensorDict) -> dict:
 def evaluate(cfg: DictConfig) -> dict:
     ds = MQADataset(cfg.dataset)
     names = list(cfg.report) if cfg.report else list(cfg.systems)
+    unknown = [n for n in names if n not in cfg.systems]
+    if unknown:                                  # before minutes of collecting the others
+        raise ValueError(f"report names unknown system(s) {unknown}; known: {list(cfg.systems)}")
     results: dict = {"questions": cfg.questions.name, "vqa": cfg.vqa.name, "systems": {}, "references": {}}
     plan = plan_questions(ds, "test", list(cfg.questions.types), None, cfg.questions.max_per_group["test"],
                           int(cfg.collection.seed))

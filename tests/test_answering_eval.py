@@ -177,6 +177,9 @@ def test_evaluate_refuses_a_vqa_trained_on_test_rollouts(small_dataset, trained,
     with pytest.raises(ValueError, match="trained on test-split rollouts"):
         evaluate.evaluate(compose_recipe_config("evaluate", [*overrides, "progress=false", "report=[privileged]",
                                                              f"vqa_dir={tmp_path / 'vqa'}"]))
+    with pytest.raises(ValueError, match="unknown system.*'privilegd'"):       # named before any collecting
+        evaluate.evaluate(compose_recipe_config("evaluate", [*overrides, "progress=false", "report=[random,privilegd]",
+                                                             f"vqa_dir={tmp_path / 'vqa'}"]))
 
 
 def test_evaluate_from_the_command_line(trained, tmp_path):

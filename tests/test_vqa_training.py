@@ -127,17 +127,17 @@ def test_pretrain_and_train_vqa_recipes_write_log_and_resume(small_dataset, answ
         *overrides, *quiet, "train.steps=2", "train.batch_size=2", "train.eval_interval=1", "frames.max_frames=8"]))
     assert (root / "encoder" / "encoder.pt").exists() and summary["steps"] == 2
     train_vqa = load_recipe("train_vqa")
+    run = root / "vqa" / "resume-test" / "random"           # its own folder: other tests train eqa VQAs of random too
     args = [*overrides, *quiet, "system=random", "vqa=eqa", "train.batch_size=4", "train.eval_interval=3",
-            "checkpoint.interval_steps=3"]
+            "checkpoint.interval_steps=3", f"out_dir={run}"]
     first = train_vqa.train(compose_recipe_config("train_vqa", [*args, "train.steps=6"]))
-    run = root / "vqa" / "counting-eqa" / "random"
     assert first["steps"] == 6 and (run / "vqa.pt").exists() and (run / "config.yaml").exists()
     with pytest.raises(FileExistsError, match="resume=true"):
         train_vqa.train(compose_recipe_config("train_vqa", [*args, "train.steps=6"]))
     again = train_vqa.train(compose_recipe_config("train_vqa", [*args, "train.steps=9", "resume=true"]))
     assert again["steps"] == 9
     assert _steps(run, "train/loss") == [3, 6, 9]                        # continued, nothing logged twice
-    with pytest.raises(ValueError, match="train.select=loss"):           # kept by loss: resumed by loss only
+    with pytest.raises(ValueError, match="train.select: 'loss' -> 'accuracy'"):   # kept by loss: resumed by loss only
         train_vqa.train(compose_recipe_config("train_vqa", [*args, "train.steps=12", "resume=true", "train.select=accuracy"]))
     model = load_vqa(run)
     assert model.meta["system"] == "random" and model.meta["encoder"]["frozen"] and model.answers == list(small_dataset.answers)
