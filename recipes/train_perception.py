@@ -43,6 +43,7 @@ from mqa_rl.modules.perception import (PERCEPTION_FORMAT, PERCEPTION_VERSION, Co
 from mqa_rl.modules.vqa_encoder import standardise
 from mqa_rl.training.model_checkpoint import ModelCheckpoint
 from mqa_rl.training.resume_guard import RESUMABLE, refuse_changed_config
+from mqa_rl.training.run_dir import positive_ints, refuse_unresumable
 from mqa_rl.training.run_logger import RunLogger, trim_scalars
 from mqa_rl.training.signals import exit_on_sigterm
 from mqa_rl.training.vqa_data import scene_split
@@ -57,8 +58,7 @@ COMMAND = "python recipes/train_perception.py"
 
 def check_config(cfg: DictConfig) -> None:
     t = cfg.train
-    if min(t.steps, t.batch_size, t.eval_interval, cfg.checkpoint.interval_steps) <= 0:
-        raise ValueError("train.steps, train.batch_size, train.eval_interval and checkpoint.interval_steps must be positive")
+    positive_ints(cfg, "train.steps", "train.batch_size", "train.eval_interval", "checkpoint.interval_steps")
     if not 0.0 < t.val_fraction < 1.0:
         raise ValueError(f"train.val_fraction={t.val_fraction} must lie in (0, 1): the checkpoint is chosen on held-out scenes")
     if t.lr <= 0 or t.warmup_steps < 0:
@@ -209,10 +209,8 @@ def train(cfg: DictConfig) -> dict:
     schedule = torch.optim.lr_scheduler.LambdaLR(optim, factor)
     state = {"step": 0, "best": -math.inf, "best_step": -1, "train_seconds": 0.0}
     ckpt = ModelCheckpoint(out / "checkpoints", model=model, optimizer=optim, state=state, keep_last=cfg.checkpoint.keep_last)
+    refuse_unresumable(out, ckpt.latest() is not None, bool(cfg.resume))
     if ckpt.latest() is not None:
-        if not cfg.resume:
-            raise FileExistsError(f"{out} already holds checkpoints ({ckpt.latest().name}): pass resume=true to continue "
-                                  f"that run, or choose another out_dir")
         refuse_changed_config(out / "config.yaml", config, allow=bool(cfg.resume_allow_changes),
                               free=(*RESUMABLE, "train.steps", "calibrate_only"))   # a longer run stretches the cosine from here
         ckpt.load()
@@ -220,9 +218,6 @@ def train(cfg: DictConfig) -> dict:
         for group, base in zip(optim.param_groups, schedule.base_lrs):
             group["lr"] = base * factor(state["step"])
         print(f"resumed at step {state['step']} ({trim_scalars(out / 'csv', state['step'])} log rows after it dropped)")
-    elif (out / "config.yaml").exists() or (out / "csv").exists():
-        raise FileExistsError(f"{out} holds the logs of a run with no checkpoint (killed before its first one): "
-                              f"remove {out} or choose another out_dir")
     if state["step"] >= steps and (out / PERCEPTION_FILE).exists():
         print(f"{out} has finished its {state['step']} steps already (raise train.steps to train on)")
         return json.loads((out / "summary.json").read_text()) if (out / "summary.json").exists() else dict(state)

@@ -41,7 +41,6 @@ PEAK_FLOOR = 4.0           # a peak needs this much smoothed vote mass (px) to b
 # need to meet it); and which readout counts (``READOUTS``) with the density's rounding point.
 READOUTS = ("votes", "density")
 DEFAULT_COUNTING = {"radius": 2.5, "nms": 5, "min_prob": 0.05, "min_px": COUNTABLE_PX, "readout": "votes", "round_at": 0.5}
-CLUSTER_SETTINGS = ("radius", "nms", "min_prob")
 
 
 def clusters(probs: torch.Tensor, votes: torch.Tensor, cell_px: float, *, radius: float = DEFAULT_COUNTING["radius"],
@@ -93,11 +92,17 @@ def counts(probs: torch.Tensor, votes: torch.Tensor, density: torch.Tensor, cell
            round_at: float = DEFAULT_COUNTING["round_at"], **cluster_settings) -> torch.Tensor:
     """int64 [B, K-1]: objects of each class (classes 1 … K-1) under ``readout``: vote clusters holding
     ≥ ``min_px`` visible px, or the rounded density mass."""
+    masses = clusters(probs, votes, cell_px, **cluster_settings) if readout == "votes" else None
+    return read_counts(readout, expected_counts(probs, density), masses, min_px, round_at)
+
+
+def read_counts(readout: str, expected: torch.Tensor, masses, min_px: float, round_at: float) -> torch.Tensor:
+    """int64 [B, K-1] under ``readout`` from the density's expected counts or the vote clusters' masses."""
     if readout == "density":
-        return density_counts(expected_counts(probs, density), round_at)
+        return density_counts(expected, round_at)
     if readout != "votes":
         raise ValueError(f"unknown readout {readout!r}; known: {list(READOUTS)}")
-    return counts_of(clusters(probs, votes, cell_px, **cluster_settings), min_px)
+    return counts_of(masses, min_px)
 
 
 def counts_of(masses, min_px: float = COUNTABLE_PX) -> torch.Tensor:
@@ -114,7 +119,7 @@ def count_features(probs: torch.Tensor, votes: torch.Tensor, density: torch.Tens
     area = probs[:, 1:].flatten(2).sum(-1) * cell_px                               # [B, K-1] px
     expected = expected_counts(probs, density)
     masses = clusters(probs, votes, cell_px, **cluster_settings)
-    counted = density_counts(expected, round_at) if readout == "density" else counts_of(masses, min_px)
+    counted = read_counts(readout, expected, masses, min_px, round_at)
     return features_from_masses(masses, area, min_px, expected=expected, counted=counted)
 
 
