@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
+
+REPO = Path(__file__).resolve().parents[1]      # the checkout the tests run in
 
 SMALL = {"easy": 2, "medium": 1, "hard": 2}
 
@@ -63,11 +67,9 @@ def assert_bit_identical_replays():
 # ----------------------------------------------------------------------------------------- answering
 def compose_recipe_config(name: str, overrides: list[str]):
     """A recipe's hydra config (recipes/conf/<name>.yaml) with overrides, as its command line would give."""
-    from pathlib import Path
-
     from hydra import compose, initialize_config_dir
 
-    with initialize_config_dir(config_dir=str(Path(__file__).parents[1] / "recipes" / "conf"), version_base="1.3"):
+    with initialize_config_dir(config_dir=str(REPO / "recipes" / "conf"), version_base="1.3"):
         return compose(name, overrides=overrides)
 
 
@@ -75,9 +77,8 @@ def load_recipe(name: str):
     """recipes/<name>.py as a module (recipes/ is no package), to call its functions in-process."""
     import importlib.util
     import sys
-    from pathlib import Path
 
-    recipes = Path(__file__).parents[1] / "recipes"
+    recipes = REPO / "recipes"
     if str(recipes) not in sys.path:
         sys.path.append(str(recipes))          # as when run as a script (evaluate.py imports plot_curves)
     spec = importlib.util.spec_from_file_location(f"recipe_{name}", recipes / f"{name}.py")

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Debian's headless Chromium and its driver (chromium, chromium-driver), for the web demo's end-to-end
-# test (tests/test_demo_browser.py), installed with apt-get when missing; no browser build is
+# test (tests/e2e/test_demo_browser.py), installed with apt-get when missing; no browser build is
 # downloaded at run time (selenium is pointed at /usr/bin/chromium and /usr/bin/chromedriver).
 set -euo pipefail
 log() { printf '[browser] %s\n' "$*" >&2; }

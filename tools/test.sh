@@ -1,11 +1,29 @@
 #!/usr/bin/env bash
-# The test suite: set up the machine if needed (packages, Vulkan, Debian's headless Chromium), then
-# run pytest. The fast lane skips tests marked slow; `tools/test.sh --all` runs everything. Extra
-# arguments go to pytest.
+# The test suite: set up the machine if needed (packages, Vulkan, Debian's headless Chromium), then run
+# pytest over a lane. Tests are organised by layer: tests/unit (no simulator), tests/integration (real
+# SAPIEN scenes, in-process recipes), tests/e2e (recipes and scripts launched as a user launches them,
+# the browser); tests marked `slow` (full dataset, physics stress, kill-and-resume) run only in their lane.
+#   bash tools/test.sh          every test, layer by layer (what CI runs)
+#   bash tools/test.sh fast     unit + integration, not slow (the lane to run while working: <= 8 min)
+#   bash tools/test.sh e2e      tests/e2e, not slow
+#   bash tools/test.sh slow     the slow tests of every layer
+# Extra arguments go to pytest, e.g. `bash tools/test.sh fast tests/integration/test_env.py -x`.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
+lane=all
+case "${1:-}" in
+    all|fast|e2e|slow) lane=$1; shift ;;
+    --all) shift ;;                       # the old spelling of `all`
+esac
 . tools/bootstrap.sh
-bash tools/browser.sh          # headless Chromium for the demo's browser test: installed, never skipped
-marker=(-m "not slow")
-if [ "${1:-}" = "--all" ]; then marker=(); shift; fi
-python -m pytest "${marker[@]}" -q -p no:cacheprovider --timeout=900 "$@"
+case $lane in
+    fast) args=(-m "not slow" tests/unit tests/integration) ;;
+    e2e)  bash tools/browser.sh; args=(-m "not slow" tests/e2e) ;;
+    slow) args=(-m slow tests) ;;
+    all)  bash tools/browser.sh; args=(tests/unit tests/integration tests/e2e) ;;
+esac
+# paths given after the lane replace the lane's folders (the marker stays)
+for a in "$@"; do
+    case $a in tests/*) args=("${args[@]:0:2}"); [ "$lane" = all ] && args=(); break ;; esac
+done
+python -m pytest "${args[@]}" -q -p no:cacheprovider --timeout=1200 --durations=15 "$@"

@@ -13,7 +13,7 @@ question's target map and the height map (``PushQNet(geometric_push=True)``), wh
 the whole state.
 
 Rotation equivariance by construction: rotating the scene by 90° moves Q of direction d to direction
-d + 2, rotated (``tests/test_push_qnet.py``). Directions follow ``mqa_rl.envs.actions``: d·45°
+d + 2, rotated (``tests/integration/test_push_qnet.py``). Directions follow ``mqa_rl.envs.actions``: d·45°
 counter-clockwise as seen in the image (d = 0 points right, d = 2 up).
 """
 

@@ -4,7 +4,7 @@ An object is a union of convex parts; under a pinhole camera the image of a conv
 convex hull of its projected vertices, so the object's full silhouette (as if nothing occluded it) is
 the union of those hulls. A pixel belongs to the silhouette when its centre (c + 0.5, r + 0.5) lies
 inside a hull: the renderer's own rule, so the masks agree with an isolated render to IoU ≥ 0.99
-(tests/test_geometry.py). ``SilhouetteProjector`` does 50 objects in a few milliseconds.
+(tests/integration/test_geometry.py). ``SilhouetteProjector`` does 50 objects in a few milliseconds.
 """
 
 from __future__ import annotations

@@ -2,7 +2,6 @@
 rule on a real Q-network actor, and its file."""
 
 import warnings
-from pathlib import Path
 
 import pytest
 import torch
@@ -18,7 +17,7 @@ from mqa_rl.training.optimal_stopping import fit_stop_critic, fixed_rules, reali
 from torch_threads import one_torch_thread  # noqa: F401  (autouse)
 
 VOCAB, S = 30, 224
-ROOT = Path(__file__).parents[1]
+from conftest import REPO as ROOT
 
 
 def test_realised_values_follow_the_rule_along_each_path():

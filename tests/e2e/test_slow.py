@@ -1,4 +1,4 @@
-"""Long checks, run with `bash tools/test.sh --all`: the full default dataset and a physics stress."""
+"""Long checks, run with `bash tools/test.sh slow` (and by CI): the full default dataset and a physics stress."""
 
 import hashlib
 

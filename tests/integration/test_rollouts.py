@@ -3,7 +3,6 @@ interrupted collection without duplicates, worker processes, the DQN-checkpoint 
 references (no manipulation, privileged)."""
 
 import json
-from pathlib import Path
 
 import pytest
 import torch
@@ -15,6 +14,7 @@ from mqa_rl.collectors.rollouts import collect_rollouts, plan_questions
 from mqa_rl.collectors.store import EpisodeStore, StoreError, load_records
 from mqa_rl.data.dataset import LEVELS
 from mqa_rl.modules.frozen_policies import resolve_checkpoint
+from conftest import REPO
 
 PLAN = dict(policy={"kind": "random"}, split="train", question_types=["counting"], max_per_group=1, repeats=2,
             max_pushes=2, workers=1, chunk_episodes=2, progress=False)
@@ -114,7 +114,7 @@ def _fake_dqn_run(run, env):
     from mqa_rl.modules.push_policy import make_push_qnet, make_q_actor
     from mqa_rl.verified_checkpoint import INTEGRITY, IntegrityAdapter
 
-    model = OmegaConf.load(Path(__file__).parents[1] / "recipes" / "conf" / "trunk" / "light.yaml")
+    model = OmegaConf.load(REPO / "recipes" / "conf" / "trunk" / "light.yaml")
     cfg = OmegaConf.create({"model": model, "action_mask": True})
     run.mkdir(parents=True)
     OmegaConf.save(cfg, run / "config.yaml")

@@ -201,9 +201,10 @@ def test_the_shipped_counting_vqas_load_with_their_provenance_and_answer(system,
     provenance records, count with the calibrated settings, and answer through the public contract."""
     import hashlib
     import json
-    from pathlib import Path
 
-    folder = Path(__file__).parents[1] / "checkpoints" / "vqa_counting"
+    from conftest import REPO
+
+    folder = REPO / "checkpoints" / "vqa_counting"
     provenance = json.loads((folder / system / "provenance.json").read_text())
     assert hashlib.sha256((folder / system / "vqa.pt").read_bytes()).hexdigest() == provenance["vqa_sha256"]
     perception, meta = load_perception(folder / "perception.pt")

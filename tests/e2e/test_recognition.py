@@ -19,7 +19,7 @@ from mqa_rl.modules.pretrained_recognition import load_recognition, save_recogni
 from mqa_rl.modules.push_qnet import PushQNet
 from torch_threads import one_torch_thread  # noqa: F401  (autouse)
 
-ROOT = Path(__file__).parents[1]
+from conftest import REPO as ROOT
 ENV = {**os.environ, "PYTHONPATH": str(ROOT), "WANDB_MODE": "offline", "WANDB_SILENT": "true"}
 VOCAB, L, S, CLASSES = 30, 8, 224, 5
 SMALL = dict(light_channels=(8, 8, 16, 16), light_downsample=2, fuse_channels=(16, 8), head_channels=(8,))

@@ -4,8 +4,9 @@ imports the reward transforms, the policies or the learners built on it."""
 
 import ast
 from pathlib import Path
+from conftest import REPO
 
-PACKAGE = Path(__file__).parents[1] / "mqa_rl"
+PACKAGE = REPO / "mqa_rl"
 
 # Bottom first. A package may import from a lower layer, never from its own layer's others or from above.
 LAYERS = (

@@ -8,8 +8,9 @@ import sys
 from pathlib import Path
 
 import pytest
+from conftest import REPO
 
-SCRIPT = Path(__file__).resolve().parents[1] / "tools" / "debian_mirror.sh"
+SCRIPT = REPO / "tools" / "debian_mirror.sh"
 
 DEB822 = """\
 Types: deb
@@ -95,7 +96,7 @@ def test_bootstrap_names_no_mirror_host():
 def test_bootstrap_refuses_a_full_disk_before_installing(tmp_path):
     """Too little free space is named up front; no package is installed and no stamp written,
     so the next run (with space freed) installs from scratch."""
-    root = Path(__file__).resolve().parents[1]
+    root = REPO
     venv = tmp_path / "venv"
     env = {**os.environ, "PYTHON": sys.executable, "MQA_VENV": str(venv), "MQA_MIN_FREE_GB": "1000000"}
     out = subprocess.run(["bash", str(root / "tools" / "bootstrap.sh")], env=env,

@@ -1,6 +1,5 @@
 """The reward stack on the real env, in a replay buffer, and with β reaching collector workers."""
 
-from pathlib import Path
 
 import pytest
 import torch
@@ -16,8 +15,9 @@ from mqa_rl.transforms.factory import register_term
 from mqa_rl.transforms.base import RewardTerm
 from mqa_rl.transforms.functional import local_occlusion_reward
 from mqa_rl.transforms.mqa_env import make_mqa_env
+from conftest import REPO
 
-CONF = Path(__file__).parents[1] / "recipes" / "conf" / "reward"
+CONF = REPO / "recipes" / "conf" / "reward"
 VARIANTS = sorted(p.stem for p in CONF.glob("*.yaml"))
 TERMS = ("exploration", "simple_scene", "beta")
 

@@ -1,7 +1,6 @@
 """What an evaluation reports per episode: the targets' χ and the targets crossing the counting line."""
 
 import math
-from pathlib import Path
 
 import torch
 from omegaconf import OmegaConf
@@ -13,7 +12,7 @@ from mqa_rl.evaluation.episode_metrics import episode_metrics
 from mqa_rl.transforms.episode_stats import COUNTABLE_PX, targets_in_view
 from mqa_rl.transforms.mqa_env import make_mqa_env
 
-REPO = Path(__file__).parents[1]
+from conftest import REPO
 
 
 def _final(target, visible_end, in_view_start, chi):

@@ -23,6 +23,7 @@ from torch_threads import one_torch_thread  # noqa: F401
 from mqa_rl import keys
 from mqa_rl.data.questions import QUESTION_TYPES
 from mqa_rl.envs import actions
+from conftest import REPO
 
 RANDOM = "random (paper's baseline)"
 
@@ -273,7 +274,7 @@ def test_the_shipped_checkpoints_folder_offers_every_policy_and_the_students_lea
     from mqa_rl.modules.learned_stop import LearnedStop
     from mqa_rl.transforms.mqa_env import make_mqa_env
 
-    root = Path(__file__).parents[1]
+    root = REPO
     env = make_mqa_env(small_dataset_dir, REWARD, split=None, max_pushes=3)
     try:
         registry = PolicyRegistry(root / "checkpoints", env, max_pushes=3)

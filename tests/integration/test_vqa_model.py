@@ -7,6 +7,7 @@ import torch
 
 from mqa_rl.data.vocab import Vocabulary
 from mqa_rl.modules.vqa import VQAModel, load_vqa, save_vqa
+from conftest import REPO
 
 VOCAB = Vocabulary.build(["How many cans are there in the bin?", "Is there a can in the bin?",
                           "How many apples are there in the bin?"]).itos
@@ -135,13 +136,11 @@ def test_the_shipped_vqa_is_the_demos_default_and_answers_a_counting_question(sm
     contract, and is what recipes/conf/demo.yaml offers by default."""
     import hashlib
     import json
-    from pathlib import Path
-
     from omegaconf import OmegaConf
 
     from mqa_rl.demo.vqa_adapter import trained_types
 
-    root = Path(__file__).parents[1]
+    root = REPO
     folder = root / "checkpoints" / "vqa_classes" / "dqn_student"
     assert OmegaConf.load(root / "recipes" / "conf" / "demo.yaml").vqa == ["checkpoints/vqa_classes/dqn_student"]
     provenance = json.loads((folder / "provenance.json").read_text())
@@ -158,11 +157,9 @@ def test_the_shipped_vqa_is_the_demos_default_and_answers_a_counting_question(sm
 def test_the_shipped_encoders_load_and_encode(name, head_width):
     """checkpoints/vqa_encoder{,_scenes}: what `encoder.weights=` points users at loads as the encoder it was
     pretrained as (the scenes one with its context heads) and gives the VQA's bottleneck and class maps."""
-    from pathlib import Path
-
     from mqa_rl.modules.vqa_encoder import load_encoder, standardise
 
-    encoder, meta = load_encoder(Path(__file__).parents[1] / "checkpoints" / name / "encoder.pt")
+    encoder, meta = load_encoder(REPO / "checkpoints" / name / "encoder.pt")
     assert encoder.head_width == head_width and encoder.out_shape == (32, 10, 10)
     frame = torch.randint(0, 256, (2, 3, 224, 224), dtype=torch.uint8)
     with torch.no_grad():

@@ -1,7 +1,6 @@
 """SapienBinEnv inside TorchRL's Collector, MultiSyncCollector (2 worker processes) and ParallelEnv."""
 
 import functools
-from pathlib import Path
 
 import pytest
 import torch
@@ -11,8 +10,9 @@ from mqa_rl import keys
 from mqa_rl.envs.sapien_bin import SapienBinEnv
 from mqa_rl.transforms import make_reward_transform
 from mqa_rl.transforms.functional import exploration_reward, global_occlusion_reward, local_occlusion_reward
+from conftest import REPO
 
-CONF = Path(__file__).parents[1] / "recipes" / "conf" / "reward"
+CONF = REPO / "recipes" / "conf" / "reward"
 
 
 def _factory(root):

@@ -7,19 +7,16 @@ import json
 import os
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 import torch
-from conftest import compose_recipe_config, load_recipe
+from conftest import REPO as ROOT, compose_recipe_config, load_recipe
 from tensordict import TensorDict
 from torch_threads import one_torch_thread  # noqa: F401  (autouse)
 
 from mqa_rl import keys
 from mqa_rl.evaluation import answering as ans
 from mqa_rl.modules.vqa import VQAModel, save_vqa
-
-ROOT = Path(__file__).parents[1]
 
 
 def test_statistics():

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import importlib.util
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,7 +17,7 @@ from mqa_rl.envs import actions
 from mqa_rl.envs.sapien_bin import SapienBinEnv
 from mqa_rl.modules.privileged_policy import PrivilegedPushPolicy
 
-ROOT = Path(__file__).resolve().parents[1]
+from conftest import REPO as ROOT
 
 
 def _occlusion_benchmark():
@@ -83,6 +82,7 @@ def _hidden_questions(env, n):
     return sorted(out, key=lambda x: -x[1])[:n]
 
 
+@pytest.mark.slow
 def test_privileged_policy_lowers_target_overlap_on_a_hard_scene(hard_env):
     questions = _hidden_questions(hard_env, 4)
     assert questions, "the small hard scenes should hide some targets"

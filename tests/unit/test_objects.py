@@ -4,11 +4,11 @@ import os
 import re
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from conftest import REPO
 from mqa_rl.data.objects import (
     CLASS_NAMES,
     CLASS_PHRASES,
@@ -132,7 +132,7 @@ def test_phrases_cover_every_class_with_correct_article():
 def test_import_does_not_pull_in_simulators():
     """Dataset tooling must be able to use the library without sapien or torch."""
     code = "import sys, mqa_rl.data.objects; print(any(m in sys.modules for m in ('sapien', 'torch')))"
-    repo_root = str(Path(__file__).resolve().parents[1])
+    repo_root = str(REPO)
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [repo_root, os.environ.get("PYTHONPATH")]))}
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env)
     assert result.stdout.strip() == "False"
