@@ -9,8 +9,11 @@
 
 Per level and policy, over the same questions (the env is seeded alike for every policy): mean
 episode reward, pushes, fraction of episodes ending in a simple scene, change of the targets' mean
-hidden fraction χ from the first to the last image, fraction of targets fully hidden at the end —
-each with a 95 % interval; and greedy − random differences paired by question. Writes
+hidden fraction χ from the first to the last image, fraction of targets fully hidden at the end, the net
+number of targets made countable (``countable_gain``: made countable − buried, per episode) and whether a
+perfect counter reads the COUNTING answer from I_stop (``counter_stop``) or from either frame
+(``counter_either``) — each with a 95 % interval; and greedy − each other policy (random, no_manipulation, ...)
+paired by question. Writes
 ``results.json``, ``results.md``, the per-episode metrics (``episodes/<policy>_<level>.pt``) and
 videos (Q maps beside the frames) to ``out_dir``. ``baseline_from=<an earlier out_dir>`` reuses that
 evaluation's random episodes when they were run on the same questions (same dataset, split, seed,
@@ -49,8 +52,10 @@ ORACLES = {"oracle": {"kind": "privileged", "lookahead": 1},
            "image_teacher": {"kind": "privileged", "lookahead": 1, "order": "visible_first", "geometry": "visible"},
            "refined_teacher": {"kind": "privileged", "lookahead": 1, "order": "visible_first", "geometry": "visible",
                                "refine_radius": 1}}
+# the reference that never pushes: the first image is the last (what a policy's pushes are worth beside nothing)
+NO_MANIPULATION = {"kind": "none"}
 REPORTED = ("reward", "pushes", "final_simple", "chi_end", "chi_change", "hidden_end", "into_view", "out_of_view",
-            "stopped")
+            "countable_gain", "counter_stop", "counter_either", "stopped")
 
 
 def episodes_meta(cfg: DictConfig, dataset, level: str, qtypes, max_pushes: int, reward: dict,
@@ -128,10 +133,10 @@ def main(cfg: DictConfig) -> None:
                         write_video(frames, out / "videos" / f"{level}_{i}.{cfg.video_format}")
             elif name in ("random", "random_masked"):
                 policy = RandomMQAPolicy(max_pushes, seed=cfg.seed, masked=name == "random_masked")
-            elif name in ORACLES:
-                policy, _ = make_frozen_policy(ORACLES[name], env.base_env, max_pushes)
+            elif name in ORACLES or name == "no_manipulation":
+                policy, _ = make_frozen_policy(ORACLES.get(name, NO_MANIPULATION), env.base_env, max_pushes)
             else:
-                raise ValueError(f"unknown policy {name!r}; choose among greedy, random, random_masked, "
+                raise ValueError(f"unknown policy {name!r}; choose among greedy, random, random_masked, no_manipulation, "
                                  + ", ".join(ORACLES))
             m = reused if reused is not None else run_episodes(
                 env, policy, cfg.episodes_per_level, max_pushes=max_pushes, simple_threshold=threshold, on_episode=on_episode)

@@ -19,7 +19,7 @@
   often a 3; this, not the raw counter, is the ceiling to hold a count-reading VQA against.
 * ``prior_answers``: the majority answer per (type, level) among the training questions: a VQA that
   ignores the images and the question's object can reach this.
-* ``policy_stats``: pushes, targets' χ at the end and its change, per level, ± 95 % (``mean_ci95``).
+* ``policy_stats``: pushes, targets' χ at the end and its change, targets made countable − buried, per level, ± 95 % (``mean_ci95``).
 """
 
 from __future__ import annotations
@@ -183,11 +183,16 @@ def prior_right(records: TensorDict, prior: dict[tuple[int, int], int]) -> torch
 
 
 def policy_stats(records: TensorDict) -> dict[str, dict[str, tuple[float, float, int]]]:
-    """{level or "all": {"pushes" | "chi_end" | "chi_change" | "stopped": (mean, 95 % half-width, n)}}."""
+    """{level or "all": {"pushes" | "chi_end" | "chi_change" | "stopped" | "countable_gain": (mean, 95 % half-width,
+    n)}}; ``countable_gain``: targets made countable (≥ ``COUNTABLE_PX`` visible pixels) between I_start and I_stop
+    minus targets pushed below that line, per episode."""
     levels = records.get(keys.LEVEL)
     chi_start, chi_end = records.get(keys.CHI_START), records.get(keys.CHI_END)
+    targets = records.get(keys.EPISODE_TARGETS)
+    start, end = ((records.get((f, keys.FRAME_VISIBLE)) >= COUNTABLE_PX) & targets for f in (keys.FIRST, keys.LAST))
     values = {"pushes": records.get(keys.PUSHES).float(), "chi_end": chi_end, "chi_change": chi_end - chi_start,
-              "stopped": records.get(keys.STOPPED).float()}
+              "stopped": records.get(keys.STOPPED).float(),
+              "countable_gain": ((end & ~start).sum(-1) - (start & ~end).sum(-1)).float()}
     out = {}
     for name, mask in [*((lv, levels == i) for i, lv in enumerate(LEVELS)), ("all", torch.ones_like(levels, dtype=torch.bool))]:
         if mask.any():

@@ -109,9 +109,10 @@ def per_type_markdown(results: dict) -> str:
 
 
 def policy_markdown(results: dict) -> str:
-    cols = ("pushes", "stopped", "chi_end", "chi_change")
-    lines = ["| system | level | pushes | stopped | targets' χ at the end | χ end − start | perfect counter (≥ 20 px) "
-             "on I_start | on I_stop | on either | calibrated on I_stop | calibrated on either |", "|---|---|" + "---|" * 9]
+    cols = ("pushes", "stopped", "chi_end", "chi_change", "countable_gain")
+    lines = ["| system | level | pushes | stopped | targets' χ at the end | χ end − start | targets made countable − "
+             "buried | perfect counter (≥ 20 px) on I_start | on I_stop | on either | calibrated on I_stop | calibrated "
+             "on either |", "|---|---|" + "---|" * 10]
     for name, res in results["systems"].items():
         if res["status"] != "ok":
             continue

@@ -11,9 +11,14 @@ Needs ``EpisodeStats`` in the env (``make_mqa_env(..., episode_stats=True)``). P
 * ``into_view`` / ``out_of_view``: fraction of the targets that crossed the counting line (``COUNTABLE_PX``
   visible pixels) between the first and last image, upwards / downwards; ``in_view_change`` their
   difference. This is what an answer can gain: χ falls also on targets a counter already sees.
+* ``countable_made`` / ``countable_buried``: the same crossings as counts of targets; ``countable_gain`` =
+  made − buried, per episode (0 without target): the net number of targets a perfect counter gains.
+* ``counter_start`` / ``counter_stop`` / ``counter_either``: 1 when a perfect counter (targets with ≥
+  ``COUNTABLE_PX`` visible pixels) reads the COUNTING answer (every target of the class) from I_start / I_stop /
+  the two frames together (a target countable in either, counted once); NaN for the other question types.
 
-Target metrics are NaN for episodes whose question has no target in the bin (a COUNTING answer 0);
-``summarise`` ignores NaN.
+The χ and view-fraction metrics are NaN for episodes whose question has no target in the bin (a COUNTING
+answer 0); ``summarise`` ignores NaN.
 """
 
 from __future__ import annotations
@@ -24,12 +29,14 @@ import torch
 from tensordict import TensorDictBase
 
 from mqa_rl import keys
+from mqa_rl.data.questions import QUESTION_TYPES
 from mqa_rl.transforms.episode_stats import mean_target_chi, targets_in_view
 from mqa_rl.transforms.functional import is_simple_scene
 
 FULLY_HIDDEN = 1.0 - 1e-6
 FINAL_KEYS = (keys.TARGET_MASK, keys.OVERLAP, keys.VISIBLE_AREA, keys.TARGET_CHI_START, keys.TARGETS_IN_VIEW_START,
-              keys.EPISODE_REWARD, keys.PUSH_COUNT, keys.IS_STOP, keys.EPISODE_TERMS)
+              keys.EPISODE_REWARD, keys.PUSH_COUNT, keys.IS_STOP, keys.EPISODE_TERMS, keys.QUESTION_TYPE)
+COUNTING = QUESTION_TYPES.index("counting")
 
 
 def episode_metrics(final: TensorDictBase, simple_threshold: float = 0.2) -> dict[str, torch.Tensor]:
@@ -55,6 +62,13 @@ def episode_metrics(final: TensorDictBase, simple_threshold: float = 0.2) -> dic
     out["into_view"] = torch.where(has_target, into.to(torch.float32), nan)
     out["out_of_view"] = torch.where(has_target, out_of.to(torch.float32), nan)
     out["in_view_change"] = torch.where(has_target, (into - out_of).to(torch.float32), nan)
+    made, buried = (end & ~start).sum(-1).to(torch.float32), (start & ~end).sum(-1).to(torch.float32)
+    out.update(countable_made=made, countable_buried=buried, countable_gain=made - buried)
+    qtype = final.get(keys.QUESTION_TYPE, None)
+    counting = (qtype.squeeze(-1) == COUNTING) if qtype is not None else torch.zeros_like(has_target)
+    targets = tmask.sum(-1)
+    for name, seen in (("counter_start", start), ("counter_stop", end), ("counter_either", start | end)):
+        out[name] = torch.where(counting, (seen.sum(-1) == targets).to(torch.float32), nan)
     terms = final.get(keys.EPISODE_TERMS, None)
     if terms is not None:
         for name in terms.keys():

@@ -68,9 +68,15 @@ def test_tiny_training_run_evaluation_and_curves(small_dataset_dir, tmp_path):
     assert json.loads((ev2 / "results.json").read_text())["easy"]["random"] == res["easy"]["random"]
     ev3 = tmp_path / "eval3"                                   # other questions (another seed): not reused
     out3 = _run(str(ROOT / "recipes" / "evaluate_policy.py"), f"run={run}", "episodes_per_level=2", "difficulties=[easy]",
-                "policies=[random,image_teacher]", "seed=5", f"baseline_from={ev}", f"out_dir={ev3}", cwd=tmp_path)
+                "policies=[random,image_teacher,no_manipulation]", "question_types=[counting]", "seed=5", f"baseline_from={ev}", f"out_dir={ev3}",
+                cwd=tmp_path)
     assert "not reused" in out3.stdout
-    assert json.loads((ev3 / "results.json").read_text())["easy"]["image_teacher"]["pushes"]["n"] == 2
+    res3 = json.loads((ev3 / "results.json").read_text())["easy"]
+    assert res3["image_teacher"]["pushes"]["n"] == 2
+    # no manipulation: no push, no target made countable or buried, its counter on I_stop is the one on I_start
+    none = res3["no_manipulation"]
+    assert none["pushes"]["mean"] == 0 and none["countable_gain"]["mean"] == 0
+    assert none["counter_stop"]["mean"] == none["counter_either"]["mean"]
     _run(str(ROOT / "recipes" / "plot_curves.py"), str(run), "--out", str(tmp_path / "fig7.png"), cwd=tmp_path)
     assert (tmp_path / "fig7.png").stat().st_size > 0
     # the policy exported without its replay buffer: small, and the same greedy episodes as the run itself

@@ -110,6 +110,8 @@ def test_evaluate_writes_table3_and_names_what_is_missing(small_dataset, trained
             sys_res["random"]["accuracy"]["counting"][lv]["accuracy"] - prior[lv]["accuracy"])
     assert "− answer prior (paired)" in table
     assert sys_res["no_manipulation"]["policy"]["all"]["pushes"][0] == 0.0
+    assert sys_res["no_manipulation"]["policy"]["all"]["countable_gain"][0] == 0.0      # I_stop is I_start
+    assert sys_res["random"]["policy"]["all"]["countable_gain"][2] == 4
     with open(out / "table3.csv") as f:
         rows = list(csv.DictReader(f))
     assert {r["system"] for r in rows} >= {"random", "no_manipulation", "dqn_local"}
@@ -120,6 +122,7 @@ def test_evaluate_writes_table3_and_names_what_is_missing(small_dataset, trained
     either, last = sys_res["random"]["counter_calibrated_either"]["counting"], sys_res["random"]["counter_calibrated"]["counting"]
     assert set(either) == set(last) and "calibrated on either" in (out / "policy.md").read_text()
     assert "on either" in (out / "policy.md").read_text() and "counter_either" in rows[0]
+    assert "made countable − buried" in (out / "policy.md").read_text()
     # intervals that resample scenes: an accuracy inside its own interval, and the paired gain over no manipulation
     for lv, (mean, low, high, scenes) in sys_res["random"]["accuracy_by_scene"].items():
         assert low <= mean <= high and scenes >= 1

@@ -7,6 +7,7 @@ from omegaconf import OmegaConf
 from tensordict import TensorDict
 
 from mqa_rl import keys
+from mqa_rl.data.questions import QUESTION_TYPES
 from mqa_rl.envs import actions
 from mqa_rl.evaluation.episode_metrics import episode_metrics
 from mqa_rl.transforms.episode_stats import COUNTABLE_PX, targets_in_view
@@ -15,8 +16,9 @@ from mqa_rl.transforms.mqa_env import make_mqa_env
 from conftest import REPO
 
 
-def _final(target, visible_end, in_view_start, chi):
+def _final(target, visible_end, in_view_start, chi, question_type="counting"):
     return TensorDict({
+        keys.QUESTION_TYPE: torch.tensor([QUESTION_TYPES.index(question_type)]),
         keys.TARGET_MASK: torch.tensor(target), keys.VISIBLE_AREA: torch.tensor(visible_end, dtype=torch.float32),
         keys.OVERLAP: torch.tensor(chi), keys.TARGETS_IN_VIEW_START: torch.tensor(in_view_start),
         keys.TARGET_CHI_START: torch.tensor([0.5]), keys.EPISODE_REWARD: torch.zeros(1),
@@ -34,6 +36,25 @@ def test_targets_crossing_the_counting_line_are_counted_both_ways():
     assert m["hidden_end"].item() == 0.25
     none = _final(target=[False, False], visible_end=[0.0, 50.0], in_view_start=[False, False], chi=[1.0, 0.0])
     assert math.isnan(episode_metrics(none)["into_view"].item())         # no target: nothing to count
+
+
+def test_countable_gain_and_the_perfect_counter_on_each_frame():
+    px = COUNTABLE_PX
+    # three targets: one made countable, two buried (one of them was the only one countable with it at start)
+    m = episode_metrics(_final(target=[True, True, True], visible_end=[px, 0.0, px - 1],
+                               in_view_start=[False, True, True], chi=[0.5, 1.0, 0.9]))
+    assert (m["countable_made"].item(), m["countable_buried"].item(), m["countable_gain"].item()) == (1.0, 2.0, -1.0)
+    # the answer is 3: no single frame shows all three, the two frames together do
+    assert (m["counter_start"].item(), m["counter_stop"].item(), m["counter_either"].item()) == (0.0, 0.0, 1.0)
+    # all countable at the end: the counter on I_stop is right, a net gain of one
+    m = episode_metrics(_final(target=[True, True, False], visible_end=[px, 400.0, 0.0], in_view_start=[False, True, False],
+                               chi=[0.5, 0.1, 1.0]))
+    assert m["countable_gain"].item() == 1.0 and (m["counter_start"].item(), m["counter_stop"].item()) == (0.0, 1.0)
+    # an answer of 0 (no target) is read right from any frame; another question type has no count to read
+    none = episode_metrics(_final(target=[False], visible_end=[50.0], in_view_start=[False], chi=[0.0]))
+    assert none["counter_stop"].item() == 1.0 and none["countable_gain"].item() == 0.0
+    logic = episode_metrics(_final(target=[True], visible_end=[50.0], in_view_start=[True], chi=[0.0], question_type="logic"))
+    assert math.isnan(logic["counter_stop"].item()) and logic["countable_gain"].item() == 0.0
 
 
 def test_the_env_records_which_targets_were_in_view_at_reset_and_keeps_it(small_dataset_dir):
