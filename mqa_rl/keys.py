@@ -42,6 +42,7 @@ EXPLORATION = (REWARD_TERMS, "exploration")           # R_e
 GLOBAL_OCCLUSION = (REWARD_TERMS, "global_occlusion")  # R_g
 LOCAL_OCCLUSION = (REWARD_TERMS, "local_occlusion")    # R_l
 SCENE_OCCLUSION = (REWARD_TERMS, "scene_occlusion")    # R_s: R_g over every object (question-agnostic)
+COUNTABLE_TARGETS = (REWARD_TERMS, "countable_targets")  # R_c: targets made countable − buried, over the targets
 SIMPLE_SCENE = (REWARD_TERMS, "simple_scene")          # 1.0 when the scene before the action was simple
 BETA = (REWARD_TERMS, "beta")                          # β used for this step
 

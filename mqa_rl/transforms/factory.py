@@ -25,6 +25,7 @@ from torchrl.envs import Compose
 
 from mqa_rl.transforms.base import RewardTerm
 from mqa_rl.transforms.beta import BetaSchedule
+from mqa_rl.transforms.countable import CountableTargetsReward
 from mqa_rl.transforms.exploration import ExplorationReward
 from mqa_rl.transforms.mqa_reward import MQAReward
 from mqa_rl.transforms.occlusion import GlobalOcclusionReward, LocalOcclusionReward, SceneOcclusionReward
@@ -35,6 +36,7 @@ TERM_REGISTRY: dict[str, type[RewardTerm]] = {
     "global_occlusion": GlobalOcclusionReward,
     "local_occlusion": LocalOcclusionReward,
     "scene_occlusion": SceneOcclusionReward,
+    "countable_targets": CountableTargetsReward,
 }
 
 

@@ -96,3 +96,14 @@ def is_simple_scene(chi: torch.Tensor, target_mask: torch.Tensor, threshold: flo
     """
     t = target_mask.bool()
     return (~t | (chi <= threshold)).all(-1)
+
+
+def countable_targets_reward(visible_before: torch.Tensor, visible_after: torch.Tensor, target_mask: torch.Tensor,
+                             min_px: float, per_target: bool = True) -> torch.Tensor:
+    """R_c = (targets that rose to ≥ ``min_px`` visible pixels − targets that fell below) / number of targets
+    ([..., K] → [...]; the raw count when not ``per_target``): what a perfect counter gains from the push, not
+    how much of the targets shows. 0 without target."""
+    targets = target_mask.bool()
+    before, after = (visible_before >= min_px) & targets, (visible_after >= min_px) & targets
+    net = ((after & ~before).sum(-1) - (before & ~after).sum(-1)).to(torch.float32)
+    return net / targets.sum(-1).clamp(min=1) if per_target else net

@@ -13,7 +13,7 @@ from mqa_rl.envs.sapien_bin import SapienBinEnv
 from mqa_rl.transforms import BetaSchedule, make_reward_transform
 from mqa_rl.transforms.factory import register_term
 from mqa_rl.transforms.base import RewardTerm
-from mqa_rl.transforms.functional import local_occlusion_reward
+from mqa_rl.transforms.functional import countable_targets_reward, local_occlusion_reward
 from mqa_rl.transforms.mqa_env import make_mqa_env
 from conftest import REPO
 
@@ -55,6 +55,13 @@ def test_specs_and_every_term_in_a_rollout(base, variant):
     for name in names:
         assert (keys.REWARD_TERMS, name) in r.keys(True) and ("next", keys.REWARD_TERMS, name) in r.keys(True)
     assert torch.isfinite(r["next", keys.REWARD]).all()
+
+
+def test_the_countable_term_is_its_formula_on_the_envs_measurements(base):
+    env = TransformedEnv(base, make_reward_transform(reward_cfg("countable"), push_length=base.push_length))
+    r = env.rollout(4, break_when_any_done=False)
+    expected = countable_targets_reward(r[keys.VISIBLE_AREA], r["next", *keys.VISIBLE_AREA], r[keys.TARGET_MASK], 20.0)
+    assert torch.allclose(r["next", *keys.COUNTABLE_TARGETS].squeeze(-1), expected)
 
 
 def _first(env, questions, want_simple):
