@@ -49,6 +49,32 @@ def load_tensors(path: str | Path, *, what: str, hint: str):
         raise ValueError(f"{path} is not a readable {what} ({load_failure(error)}): {hint}") from error
 
 
+PICKLED = ("*.pickle", "*.pkl")      # what TensorDict and TorchRL write for objects that are not tensors
+
+
+class PickledFileRefused(ValueError):
+    """A folder a recipe reads holds a pickle, which is never unpickled here (unpickling runs its code)."""
+
+
+def refuse_pickles(folder: str | Path, *, what: str, hint: str) -> None:
+    """``PickledFileRefused`` naming the first pickled file anywhere under ``folder``: mqa_rl writes tensors and
+    JSON only, so a pickle in a rollout chunk, a checkpoint or a replay buffer was put there by someone else."""
+    folder = Path(folder)
+    found = sorted(f for pattern in PICKLED for f in folder.rglob(pattern)) if folder.is_dir() else []
+    if found:
+        raise PickledFileRefused(f"{what} {folder} holds a pickled file, {found[0]}, which is never unpickled here "
+                                 f"(it could run any code): mqa_rl writes tensors and JSON only; {hint}")
+
+
+def load_memmap(path: str | Path, *, what: str, hint: str):
+    """``TensorDict.load_memmap(path)`` of tensors and JSON only: a pickled leaf (``other.pickle``) is refused
+    with ``PickledFileRefused`` naming the file, before anything is read."""
+    from tensordict import TensorDict
+
+    refuse_pickles(path, what=what, hint=hint)
+    return TensorDict.load_memmap(path, allow_pickle=False)
+
+
 def save_versioned(path: str | Path, fmt: str, version: int, blob: dict) -> Path:
     """``blob`` with ``format`` and ``version`` to ``path``, through a temporary file and a rename."""
     import torch

@@ -1,12 +1,15 @@
-"""TorchRL checkpoints whose files are checked before anything is read: the bottom of the house beside
-``files.py`` (imports nothing else from mqa_rl), so that the modules that load a shipped policy and
-the training loops that save and resume runs share one format without importing each other.
+"""TorchRL checkpoints whose files are checked before anything is read: just above ``files.py`` at the bottom
+of the house (imports nothing else from mqa_rl), so that the modules that load a shipped policy and the
+training loops that save and resume runs share one format without importing each other.
 
 ``IntegrityAdapter`` is the last component of a checkpoint: the SHA-256 of every file of the others,
 checked before anything is restored, so a truncated or altered file is refused instead of being
 loaded as garbage (a truncated memmap would otherwise read as zeros). ``newest_checkpoint`` finds the
 newest readable checkpoint of a rotation and names newer unreadable ones instead of skipping them;
-``restore_verified`` loads after the check. A checkpoint that cannot be read raises
+``restore_verified`` loads after the check. A checkpoint holds tensors and JSON only: a pickled file in it
+(a crafted ``other.pickle`` leaf or ``prefetch.pkl``) is refused before anything is read, since the
+SHA-256 record sits beside the files and anyone can reseal it; ``TensorsOnlyReplayAdapter`` saves a
+replay buffer without TorchRL's ``prefetch.pkl``. A checkpoint that cannot be read raises
 ``CheckpointCorrupt`` with its path and what to do. The resumable runs built on it are
 ``mqa_rl.training.checkpoint`` (DQN) and ``mqa_rl.training.model_checkpoint`` (VQA, encoder).
 """
@@ -17,7 +20,9 @@ import hashlib
 import json
 from pathlib import Path
 
-from torchrl.checkpoint import CheckpointAdapter, CheckpointError, CheckpointRotation
+from torchrl.checkpoint import CheckpointAdapter, CheckpointError, CheckpointRotation, DumpLoadCheckpointAdapter
+
+from mqa_rl.files import refuse_pickles
 
 INTEGRITY = "zz_integrity"        # sorts last: saved after every other component of the checkpoint
 
@@ -56,6 +61,11 @@ class IntegrityAdapter(CheckpointAdapter):
     def verify(checkpoint_dir: Path, component: str | None = None) -> None:
         """Raise ``ValueError`` naming the files that are missing or differ from their digests; with
         ``component`` (e.g. ``"policy"``) only that component's files (not the whole replay buffer)."""
+        roots = [checkpoint_dir / "components"] if component is None else \
+            sorted((checkpoint_dir / "components").glob(f"*-{component}"))
+        for root in roots:
+            refuse_pickles(root, what="the checkpoint", hint="mqa_rl's checkpoints hold tensors and JSON only; use a "
+                                                           "checkpoint from a source you trust")
         found = list((checkpoint_dir / "components").glob(f"*{INTEGRITY}/sha256.json"))
         if not found:
             raise ValueError("no integrity record (sha256.json): not a complete mqa_rl training checkpoint")
@@ -68,6 +78,22 @@ class IntegrityAdapter(CheckpointAdapter):
         bad = sorted(k for k in expected if actual.get(k) != expected[k]) + sorted(set(actual) - set(expected))
         if bad:
             raise ValueError(f"{len(bad)} file(s) missing or changed since saved, e.g. {bad[:3]}")
+
+
+class TensorsOnlyReplayAdapter(DumpLoadCheckpointAdapter):
+    """A replay buffer's ``dumps`` (storage, sampler and writer state: memmaps and JSON) without the
+    ``prefetch.pkl`` TorchRL adds, a pickle of the batches prefetched but not yet sampled, which an mqa_rl buffer
+    never has (it samples without prefetch). Loading reads the same format (no prefetch file: none pending)."""
+
+    def save(self, component, path: Path, *, args, kwargs):
+        out = super().save(component, path, args=args, kwargs=kwargs)
+        prefetch = Path(path) / "prefetch.pkl"
+        if prefetch.exists():
+            if getattr(component, "_prefetch_queue", None):
+                raise RuntimeError("the replay buffer holds prefetched batches, which a checkpoint could only keep "
+                                   "as a pickle: build it without prefetch")
+            prefetch.unlink()
+        return out
 
 
 def newest_checkpoint(rotation: CheckpointRotation) -> Path | None:

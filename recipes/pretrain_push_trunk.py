@@ -43,7 +43,7 @@ from mqa_rl.collectors.class_frames import collect_class_frames
 from mqa_rl.data.dataset import dataset_fingerprint
 from mqa_rl.data import MQADataset
 from mqa_rl.envs.sapien_bin import SapienBinEnv
-from mqa_rl.files import write_atomic
+from mqa_rl.files import load_memmap, write_atomic
 from mqa_rl.losses.class_cells import ClassCellsLoss
 from mqa_rl.modules.pretrained_recognition import load_recognition, save_recognition
 from mqa_rl.modules.push_policy import make_push_qnet
@@ -63,7 +63,7 @@ def labelled_frames(cfg: DictConfig, dataset: MQADataset, out: Path) -> TensorDi
     if (cache / "frames.json").exists():
         if json.loads((cache / "frames.json").read_text()) == wanted:
             try:
-                return TensorDict.load_memmap(cache / "data").clone()
+                return load_memmap(cache / "data", what="the cached frames", hint="collecting again").clone()
             except Exception as error:
                 print(f"cached frames in {cache} unreadable ({type(error).__name__}: {error}): collecting again")
         shutil.rmtree(cache)

@@ -20,6 +20,7 @@ from tqdm import tqdm
 from mqa_rl import keys
 from mqa_rl.collectors.replay import OBS_KEYS
 from mqa_rl.data.dataset import dataset_fingerprint
+from mqa_rl.files import load_memmap
 from mqa_rl.modules.privileged_policy import PrivilegedPushPolicy
 
 DEMO_KEYS = (*OBS_KEYS, keys.TARGET_CELLS, keys.ACTION)
@@ -67,7 +68,7 @@ def load_demonstrations(path, dataset_root: str | Path | None = None) -> TensorD
     if dataset_root is not None and meta.get("dataset_sha256") != dataset_fingerprint(dataset_root):
         raise ValueError(f"the demonstrations in {path} were collected on another dataset than {dataset_root}: {hint}")
     try:
-        demos = TensorDict.load_memmap(path / "data").clone()
+        demos = load_memmap(path / "data", what="the demonstrations", hint=hint).clone()
     except Exception as error:
         raise ValueError(f"cannot read the demonstrations in {path} ({type(error).__name__}: {error}): {hint}") from error
     missing = [k for k in DEMO_KEYS if k not in demos.keys(True)]

@@ -28,7 +28,7 @@ import torch
 from tensordict import TensorDict
 
 from mqa_rl import keys
-from mqa_rl.files import write_atomic
+from mqa_rl.files import load_memmap, write_atomic
 
 META = "meta.json"
 SCENE_OFFSET = 1_000_000      # records of several stores (datasets) read together: scene ids + k · SCENE_OFFSET
@@ -94,7 +94,7 @@ class EpisodeStore:
     def done_slots(self) -> set[int]:
         done: set[int] = set()
         for path in self.chunk_paths():
-            slots = TensorDict.load_memmap(path).get(keys.SLOT).tolist()
+            slots = read_chunk(path).get(keys.SLOT).tolist()
             if done.intersection(slots):
                 raise StoreError(f"{path} repeats slots already stored in {self.root}: remove that chunk")
             done.update(slots)
@@ -111,6 +111,12 @@ class EpisodeStore:
         records.memmap(prefix=str(tmp))
         os.replace(tmp, final)
         return final
+
+
+def read_chunk(path: Path) -> TensorDict:
+    """One stored chunk (a memmap TensorDict of tensors and JSON): a pickled leaf is refused, never unpickled."""
+    return load_memmap(path, what="the rollout chunk", hint="delete that chunk: the next run of the same command "
+                                                           "collects its episodes again")
 
 
 def chunk_paths(root: str | Path) -> list[Path]:
@@ -133,7 +139,7 @@ def load_records(root: str | Path, select=None, *, require_complete: bool = True
     meta = read_meta(root)
     parts = []
     for path in chunk_paths(root):
-        td = TensorDict.load_memmap(path)
+        td = read_chunk(path)
         parts.append((td.select(*select, keys.SLOT) if select is not None else td).clone())   # memmap → memory
     if not parts:
         if require_complete:

@@ -22,7 +22,8 @@ from pathlib import Path
 import torch
 from torchrl.checkpoint import Checkpoint, CheckpointError, CheckpointRotation, GlobalRNGState
 
-from mqa_rl.verified_checkpoint import INTEGRITY, CheckpointCorrupt, IntegrityAdapter, newest_checkpoint, restore_verified
+from mqa_rl.verified_checkpoint import (INTEGRITY, CheckpointCorrupt, IntegrityAdapter, TensorsOnlyReplayAdapter,
+                                        newest_checkpoint, restore_verified)
 
 REPLAY = "replay_buffer"          # left out of a checkpoint saved before the first frame (still empty)
 
@@ -38,6 +39,7 @@ class TrainingCheckpoint:
         self.checkpoint = Checkpoint(policy=actor, loss=loss, optimizer=optimizer, **{REPLAY: replay_buffer},
                                      exploration=egreedy, trainer_state=state, rng=GlobalRNGState())
         self.checkpoint.register(INTEGRITY, {}, adapter=IntegrityAdapter())
+        self.checkpoint.register_adapter(type(replay_buffer), TensorsOnlyReplayAdapter())    # no prefetch.pkl
         self.replay_buffer = replay_buffer
 
     def save(self) -> Path:

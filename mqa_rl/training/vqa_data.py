@@ -22,7 +22,7 @@ import torch
 from tensordict import TensorDict
 
 from mqa_rl import keys
-from mqa_rl.collectors.store import SCENE_OFFSET, chunk_paths, load_records, read_meta
+from mqa_rl.collectors.store import SCENE_OFFSET, chunk_paths, load_records, read_chunk, read_meta
 from mqa_rl.data import MQADataset
 from mqa_rl.data.dataset import dataset_fingerprint
 from mqa_rl.transforms.dihedral import DIHEDRAL, dihedral
@@ -45,7 +45,7 @@ def encode_store(store: str | Path, encode, *, transforms: int = 1, batch_size: 
     order = {int(s): i for i, s in enumerate(records.get(keys.SLOT))}
     feats = {key: None for key in IMAGE_KEYS}
     for path in chunk_paths(store):
-        chunk = TensorDict.load_memmap(path)
+        chunk = read_chunk(path)
         rows = torch.tensor([order[int(s)] for s in chunk.get(keys.SLOT)])
         for key, out_key in zip(IMAGE_KEYS, (keys.FIRST_FEATURES, keys.LAST_FEATURES)):
             images = chunk.get(key)
@@ -178,7 +178,7 @@ def pretraining_frames(stores, dataset, *, max_frames: int | None = None, seed: 
         fingerprint = next(f for f, d in loaded.items() if d is ds)
         offset = offsets.setdefault(fingerprint, len(offsets) * SCENE_OFFSET)
         for path in chunk_paths(store):
-            chunk = TensorDict.load_memmap(path)
+            chunk = read_chunk(path)
             scenes, levels = chunk.get(keys.SCENE).tolist(), chunk.get(keys.LEVEL).tolist()
             for row, (scene, level, n) in enumerate(zip(scenes, levels, chunk.get(keys.PUSHES).tolist())):
                 if (offset, scene) not in seen_scenes:
@@ -195,7 +195,7 @@ def pretraining_frames(stores, dataset, *, max_frames: int | None = None, seed: 
     for path, which, row, scene, level, ds, offset in picks:
         if path not in cache:
             cache.clear()
-            cache[path] = TensorDict.load_memmap(path)
+            cache[path] = read_chunk(path)
         frame = cache[path].get(which)[row].select(*wanted).clone()
         objects = ds.scenes[scene].objects
         lut = torch.zeros(256, dtype=torch.uint8)

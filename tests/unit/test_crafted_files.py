@@ -1,5 +1,6 @@
-"""Files a user is handed (a results folder, a cache of trajectories) are read as tensors and plain
-containers only: a file holding a pickled object is refused, naming the file, and its code never runs."""
+"""Files a user is handed (a results folder, a cache of trajectories, rollout chunks, demonstrations) are read
+as tensors, plain containers and JSON only: a file holding a pickled object is refused, naming the file, and its
+code never runs. (Checkpoints: tests/unit/test_training_checkpoint.py.)"""
 
 import pytest
 import torch
@@ -41,4 +42,33 @@ def test_evaluate_policy_baselines_and_fit_stop_caches_are_not_unpickled(tmp_pat
     torch.save({"meta": {"level": "easy"}, "data": {"chi": torch.zeros(2)}}, tmp_path / "plain.pt")
     assert fit_stop.cached_trajectories(tmp_path / "plain.pt", {"level": "easy"})["chi"].shape == (2,)
     assert fit_stop.cached_trajectories(tmp_path / "plain.pt", {"level": "hard"}) is None
+    assert RAN == []
+
+
+def test_memmap_folders_with_a_pickled_leaf_are_refused(tmp_path):
+    """A rollout chunk or a demonstrations folder is a memmap TensorDict: a pickled leaf (TensorDict writes
+    non-tensor objects to other.pickle) is refused by every reader, before anything is unpickled."""
+    import json
+    import pickle
+
+    from tensordict import TensorDict
+
+    from mqa_rl import keys
+    from mqa_rl.collectors.demonstrations import DEMOS_META, load_demonstrations
+    from mqa_rl.collectors.store import load_records
+    from mqa_rl.files import PickledFileRefused
+
+    store = tmp_path / "rollouts"
+    TensorDict({keys.SLOT: torch.arange(3)}, batch_size=[3]).memmap(prefix=str(store / "chunk-00000"))
+    (store / "meta.json").write_text(json.dumps({"plan": {"slots": 3}}))
+    (store / "chunk-00000" / "other.pickle").write_bytes(pickle.dumps(Payload()))
+    with pytest.raises(PickledFileRefused, match="chunk-00000/other.pickle.*never unpickled.*delete that chunk"):
+        load_records(store, None, require_complete=False)
+    demos = tmp_path / "demos"
+    TensorDict({keys.SLOT: torch.arange(2)}, batch_size=[2]).memmap(prefix=str(demos / "data"))
+    (demos / DEMOS_META).write_text(json.dumps({"states": 2}))
+    (demos / "data" / "nested").mkdir()
+    (demos / "data" / "nested" / "other.pickle").write_bytes(pickle.dumps(Payload()))
+    with pytest.raises(ValueError, match="nested/other.pickle.*never unpickled"):
+        load_demonstrations(demos)
     assert RAN == []

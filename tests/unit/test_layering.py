@@ -10,7 +10,8 @@ PACKAGE = REPO / "mqa_rl"
 
 # Bottom first. A package may import from a lower layer, never from its own layer's others or from above.
 LAYERS = (
-    ("keys", "files", "verified_checkpoint"),   # names and file formats
+    ("keys", "files"),                          # names and file formats
+    ("verified_checkpoint",),                   # checkpoints checked before they are read
     ("sim",),                                   # geometry, SAPIEN scene, pushers
     ("data",),                                  # objects, scenes, questions
     ("envs",),                                  # measure

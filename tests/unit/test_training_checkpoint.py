@@ -153,3 +153,39 @@ def test_an_unreadable_newest_checkpoint_is_named_not_skipped(tmp_path):
     shutil.rmtree(newest)
     shutil.rmtree(older)
     assert a["ckpt"].latest() is None
+
+
+def _reseal(checkpoint: "Path") -> None:
+    """Rewrite the checkpoint's SHA-256 record over its files as they are now (what anyone handing a user a
+    crafted checkpoint can do: the record sits beside the files)."""
+    import json
+
+    from mqa_rl.verified_checkpoint import _digests
+
+    record = next((checkpoint / "components").glob("*zz_integrity/sha256.json"))
+    record.write_text(json.dumps(_digests(checkpoint / "components", record.parent), indent=0))
+
+
+def test_a_checkpoint_holds_no_pickle_and_a_planted_one_is_refused_never_run(tmp_path):
+    """TorchRL's replay dumps add prefetch.pkl; ours are saved without it. A pickle planted anywhere in a
+    checkpoint (the replay's prefetch.pkl, an other.pickle leaf beside the policy's tensors), even with the
+    SHA-256 record resealed, is refused naming the file before anything is read, and its code never runs."""
+    import pickle
+
+    from test_crafted_files import RAN, Payload
+
+    a = build(tmp_path, "a", seed=0)
+    train_a_little(a)
+    path = a["ckpt"].save()
+    assert not [f for f in path.rglob("*") if f.suffix in (".pkl", ".pickle")]
+    for planted in (next(path.glob("components/*-replay_buffer")) / "prefetch.pkl",
+                    next(path.glob("components/*-policy")) / "state" / "other.pickle"):
+        planted.write_bytes(pickle.dumps(Payload()))
+        _reseal(path)
+        b = build(tmp_path, "b", seed=1)
+        with pytest.raises(CheckpointCorrupt, match=f"pickled file, {planted}.*never unpickled"):
+            b["ckpt"].load()
+        assert RAN == []
+        planted.unlink()
+    _reseal(path)
+    assert build(tmp_path, "c", seed=2)["ckpt"].load() == path          # the same checkpoint, clean again
