@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import fcntl
 import numbers
+import shutil
 from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
@@ -28,7 +29,9 @@ class RunLock:
     """An exclusive ``flock`` on ``out_dir/.lock`` while a run writes there: a second run in the same
     folder is refused at once instead of doubling every log row and overwriting checkpoints. The
     kernel drops the lock when the process dies, so a killed run never blocks its resume. A folder the
-    lock made and the run left empty (refused before writing anything) goes again."""
+    lock made and the run left empty (refused before writing anything) goes again. Once the lock is held, the
+    half-written checkpoints a run killed mid-save left (``checkpoints/.<name>.stage-<id>``: TorchRL publishes a
+    checkpoint by renaming its stage, ~1.5 GB with the default replay) are removed: no writer can own them."""
 
     def __init__(self, out_dir: str | Path, recipe: str):
         self.path = Path(out_dir) / LOCK_NAME
@@ -48,6 +51,9 @@ class RunLock:
             self._file.close()
             raise RuntimeError(f"another {self.recipe} run is writing to {self.path.parent}: wait for it to finish, "
                                f"or choose another out_dir") from None
+        for stage in sorted((self.path.parent / "checkpoints").glob(".*.stage-*")):
+            print(f"removing {stage}, a checkpoint left half-written by a run killed while saving it", flush=True)
+            shutil.rmtree(stage) if stage.is_dir() else stage.unlink()
         return self
 
     def __exit__(self, *exc) -> None:
