@@ -67,6 +67,8 @@ class EpisodeStore:
         for leftover in self.root.glob(f".{CHUNK_PREFIX}*"):       # a killed writer's partial chunk
             shutil.rmtree(leftover, ignore_errors=True)
         path = self.root / META
+        if path.exists() and not chunk_paths(self.root):
+            path.unlink()               # a collection that stored nothing (its policy failed to load): nothing to keep
         if path.exists():
             found = json.loads(path.read_text())
             if _comparable(found) != _comparable(self.meta):

@@ -6,6 +6,7 @@ import json
 
 import pytest
 import torch
+from tensordict import TensorDict
 from omegaconf import OmegaConf
 
 from mqa_rl import keys
@@ -95,6 +96,12 @@ def test_store_refuses_another_plan_and_a_second_writer(small_dataset, random_st
     with EpisodeStore(tmp_path / "s", meta):
         with pytest.raises(StoreError, match="another process"):
             EpisodeStore(tmp_path / "s", meta)
+    # a collection that stored nothing (its policy failed to load) does not block the corrected command
+    with EpisodeStore(tmp_path / "s", {"slots": 1, "x": 2}) as store:
+        assert json.loads((tmp_path / "s" / "meta.json").read_text())["x"] == 2
+        store.append(TensorDict({keys.SLOT: torch.tensor([0])}, batch_size=[1]))
+    with pytest.raises(StoreError, match="another collection"):                # once it holds episodes it does
+        EpisodeStore(tmp_path / "s", {"slots": 1, "x": 3})
 
 
 def test_worker_processes_give_the_same_episodes(small_dataset, small_dataset_dir, random_store, tmp_path, monkeypatch):
