@@ -109,7 +109,6 @@ def main(cfg: DictConfig) -> None:
     qtypes = cfg.question_types or (list(run_cfg.env.question_types) if run_cfg else None)
     threshold = float(reward.get("simple_threshold", 0.2))
     push_memory = memory_radius(cfg.push_memory, run_cfg.env if run_cfg else None)
-    write_atomic(out / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))   # what these figures were measured with
     results, lines = {}, []
     for level in cfg.difficulties:
         env = make_mqa_env(str(dataset), reward, episode_stats=True, split=cfg.split, difficulties=[level],
@@ -159,7 +158,8 @@ def main(cfg: DictConfig) -> None:
         lines.append(f"\n### {level}\n\n| policy | " + " | ".join(REPORTED) + " |\n|---|" + "---|" * len(REPORTED))
         for name, row in rows.items():
             lines.append(f"| {name} | " + " | ".join(f"{shown(row[k])} (n={row[k]['n']})" for k in REPORTED) + " |")
-    for name, text in (("results.json", json.dumps(results, indent=2)), ("results.md", "\n".join(lines) + "\n")):
+    for name, text in (("results.json", json.dumps(results, indent=2)), ("results.md", "\n".join(lines) + "\n"),
+                       ("config.yaml", OmegaConf.to_yaml(cfg, resolve=True))):   # what these figures were measured with
         write_atomic(out / name, text)
     print("\n".join(lines))
     print(f"written to {out}")

@@ -97,7 +97,6 @@ def main(cfg: DictConfig) -> None:
     max_pushes = int(run_cfg.env.max_pushes)
     push_memory = memory_radius(cfg.push_memory, run_cfg.env)
     torch.set_num_threads(int(cfg.threads))
-    write_atomic(out / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))
     levels, started = {}, time.time()
     for level in cfg.difficulties:
         env = make_mqa_env(dataset, OmegaConf.to_container(run_cfg.reward), split=cfg.split, difficulties=[level], max_pushes=max_pushes,
@@ -148,6 +147,8 @@ def main(cfg: DictConfig) -> None:
             "split": cfg.split, "episodes": int(data["chi"].shape[0]), "fit": fit_options, "push_memory": push_memory}
     critic.save(out / "stop_critic.pt", meta)
     write_atomic(out / "report.json", json.dumps(report, indent=2))
+    write_atomic(out / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))   # with the results it made, not before
+
     rules = ("after_0", "after_1", "after_3", f"after_{max_pushes}", "hindsight")
     print("mean final χ of the targets (held-out training scenes where a level has some; lower is better):")
     print(f"{'level':>7} {'learned':>8} {'pushes':>7} " + " ".join(f"{r:>10}" for r in rules))
