@@ -40,7 +40,7 @@ from mqa_rl.modules.frozen_policies import make_frozen_policy
 from mqa_rl.modules.learned_stop import LearnedStop
 from mqa_rl.modules.random_policy import RandomMQAPolicy
 from mqa_rl.modules.stop_margin import StopMargin
-from mqa_rl.modules.trained_policy import load_greedy
+from mqa_rl.modules.trained_policy import load_greedy, read_run_config
 from mqa_rl.transforms.mqa_env import make_mqa_env
 from mqa_rl.transforms.push_memory import memory_radius
 
@@ -99,7 +99,7 @@ def main(cfg: DictConfig) -> None:
         raise ValueError("the greedy policy needs run=<a recipes/train_dqn.py output folder>")
     if cfg.stop_margin is not None and cfg.stop_critic is not None:
         raise ValueError("stop_margin and stop_critic are two stopping rules: give one of them")
-    run_cfg = OmegaConf.load(Path(cfg.run) / "config.yaml") if cfg.run else None
+    run_cfg = read_run_config(cfg.run) if cfg.run else None
     dataset = cfg.dataset or (run_cfg.dataset if run_cfg else None)
     if dataset is None:
         raise ValueError("give dataset=... (or run=... to use the run's dataset)")

@@ -18,12 +18,12 @@ from pathlib import Path
 
 import hydra
 import torch
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 from torchrl.checkpoint import Checkpoint
 
 from mqa_rl import keys
 from mqa_rl.data.dataset import dataset_fingerprint
-from mqa_rl.modules.trained_policy import load_greedy
+from mqa_rl.modules.trained_policy import load_greedy, read_run_config
 from mqa_rl.training.policy_export import check_export_target, export_policy, folder_bytes
 from mqa_rl.transforms.mqa_env import make_mqa_env
 
@@ -41,10 +41,13 @@ def export(cfg: DictConfig) -> dict:
     if not cfg.run or not cfg.out_dir:
         raise ValueError("give run=<a train_dqn.py output folder> and out_dir=<where the export goes>")
     run = Path(cfg.run)
-    if not (run / "config.yaml").exists():
-        raise FileNotFoundError(f"{run / 'config.yaml'} not found: run= must be a recipes/train_dqn.py output folder")
+    run_cfg = read_run_config(run)
+    source_run = json.loads((run / "provenance.json").read_text()).get("source_run") \
+        if (run / "provenance.json").is_file() else None
+    if source_run:
+        raise ValueError(f"{run} is already an export of {source_run} (its checkpoint holds only the Q-network): use it "
+                         f"as it is (copy the folder), or export the training run itself")
     check_export_target(run, Path(cfg.out_dir), bool(cfg.overwrite))      # before the env is built
-    run_cfg = OmegaConf.load(run / "config.yaml")
     dataset = str(cfg.dataset or run_cfg.dataset)
     env = make_mqa_env(dataset, split="test", seed=0, image_size=int(run_cfg.env.image_size))
     try:

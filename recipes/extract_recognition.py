@@ -15,12 +15,12 @@ import json
 from pathlib import Path
 
 import hydra
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 
 from mqa_rl.data.dataset import dataset_fingerprint
 from mqa_rl.modules.pretrained_recognition import save_recognition
 from mqa_rl.modules.push_qnet import PushQNet
-from mqa_rl.modules.trained_policy import load_greedy
+from mqa_rl.modules.trained_policy import load_greedy, read_run_config
 from mqa_rl.transforms.mqa_env import make_mqa_env
 
 
@@ -30,9 +30,7 @@ def extract(cfg: DictConfig) -> Path:
     run, out = Path(cfg.run), Path(cfg.out)
     if out.exists() and not cfg.overwrite:
         raise FileExistsError(f"{out} exists: choose another out, or overwrite=true to replace it")
-    if not (run / "config.yaml").exists():
-        raise FileNotFoundError(f"{run / 'config.yaml'} not found: run= must be a recipes/train_dqn.py output folder")
-    run_cfg = OmegaConf.load(run / "config.yaml")
+    run_cfg = read_run_config(run)
     if not run_cfg.model.get("class_map"):
         raise ValueError(f"{run} was trained without model.class_map: it has no recognition to extract")
     dataset = str(cfg.dataset or run_cfg.dataset)

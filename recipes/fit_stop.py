@@ -28,7 +28,7 @@ from mqa_rl import keys
 from mqa_rl.files import load_tensors, write_atomic
 from mqa_rl.modules.learned_stop import FEATURES, policy_fingerprint, policy_net, stop_features
 from mqa_rl.modules.stop_margin import StopMargin
-from mqa_rl.modules.trained_policy import load_greedy
+from mqa_rl.modules.trained_policy import load_greedy, read_run_config
 from mqa_rl.training.optimal_stopping import fit_stop_critic, fixed_rules, stopped_chi
 from mqa_rl.transforms.episode_stats import mean_target_chi
 from mqa_rl.transforms.mqa_env import make_mqa_env
@@ -90,9 +90,7 @@ def main(cfg: DictConfig) -> None:
     out, run = Path(cfg.out_dir), Path(cfg.run)
     if (out / "stop_critic.pt").exists() and not cfg.overwrite:
         raise FileExistsError(f"{out / 'stop_critic.pt'} exists: choose another out_dir, or overwrite=true")
-    if not (run / "config.yaml").exists():
-        raise FileNotFoundError(f"{run / 'config.yaml'} not found: run= must be a recipes/train_dqn.py output folder")
-    run_cfg = OmegaConf.load(run / "config.yaml")
+    run_cfg = read_run_config(run)
     dataset = str(cfg.dataset or run_cfg.dataset)
     max_pushes = int(run_cfg.env.max_pushes)
     push_memory = memory_radius(cfg.push_memory, run_cfg.env)

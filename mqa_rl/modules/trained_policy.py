@@ -18,6 +18,23 @@ from mqa_rl.modules.push_policy import make_push_qnet, make_q_actor
 from mqa_rl.verified_checkpoint import CheckpointCorrupt, IntegrityAdapter, newest_checkpoint
 
 
+RUN_KEYS = ("dataset", "env", "model", "reward")      # what every train_dqn.py config.yaml holds
+
+
+def read_run_config(run: str | Path):
+    """The ``config.yaml`` of a ``recipes/train_dqn.py`` run folder (or an export of one); a clear error when the
+    folder has none, or when its config.yaml is another recipe's (an evaluation's, a VQA's)."""
+    path = Path(run) / "config.yaml"
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} not found: run= must be a recipes/train_dqn.py output folder")
+    cfg = OmegaConf.load(path)
+    missing = [k for k in RUN_KEYS if k not in cfg]
+    if missing:
+        raise ValueError(f"{path} has no {', '.join(missing)}: {run} is another recipe's folder (an evaluation's, a "
+                         f"stop fit's, a VQA's), not a recipes/train_dqn.py run; give run= a train_dqn.py out_dir")
+    return cfg
+
+
 def run_checkpoints(run: str | Path) -> list[Path]:
     """The checkpoints of a run folder, oldest first (empty when it has none)."""
     directory = Path(run) / "checkpoints"
@@ -37,10 +54,7 @@ def load_greedy(run: str | Path, checkpoint: str | Path | None, env):
     and action spec. Returns ``(actor, run_config, checkpoint_path)``.
     """
     run = Path(run)
-    cfg_path = run / "config.yaml"
-    if not cfg_path.exists():
-        raise FileNotFoundError(f"{cfg_path} not found: run= must be a recipes/train_dqn.py output folder")
-    cfg = OmegaConf.load(cfg_path)
+    cfg = read_run_config(run)
     base = getattr(env, "base_env", env)
     net = make_push_qnet(cfg.model, vocab_size=env.observation_spec[keys.QUESTION].space.n,
                          camera_distance=base.camera.distance, num_classes=len(base.dataset.classes))

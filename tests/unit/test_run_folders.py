@@ -1,0 +1,26 @@
+"""run= must name a train_dqn.py run folder: another recipe's folder, or an export given to export_policy, is
+named as such before anything is built (it used to fail deep inside with `Missing key reward` or
+`missing=['trainer_state']`)."""
+
+import pytest
+from conftest import REPO, compose_recipe_config, load_recipe
+
+from mqa_rl.modules.trained_policy import read_run_config
+
+
+def test_another_recipes_folder_is_named_not_a_missing_key(tmp_path):
+    (tmp_path / "eval").mkdir()
+    (tmp_path / "eval" / "config.yaml").write_text("run: runs/x\npolicies: [greedy]\nepisodes_per_level: 3\n")
+    with pytest.raises(ValueError, match="has no dataset, env, model, reward: .*another recipe's folder"):
+        read_run_config(tmp_path / "eval")
+    with pytest.raises(FileNotFoundError, match="run= must be a recipes/train_dqn.py output folder"):
+        read_run_config(tmp_path / "nothing")
+    assert read_run_config(REPO / "checkpoints" / "dqn_local").reward.name == "local"
+
+
+def test_export_policy_refuses_an_export(tmp_path):
+    export = load_recipe("export_policy")
+    cfg = compose_recipe_config("export_policy", [f"run={REPO / 'checkpoints' / 'dqn_local'}", f"out_dir={tmp_path / 'x'}"])
+    with pytest.raises(ValueError, match="is already an export of .* use it as it is"):
+        export.export(cfg)
+    assert not (tmp_path / "x").exists()
