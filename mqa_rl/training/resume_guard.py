@@ -51,7 +51,12 @@ def refuse_changed_config(saved: Path, config: Mapping[str, Any], allow: bool = 
     saved config (older than it) is not checked."""
     if not saved.exists():
         return []
-    changes = config_changes(OmegaConf.to_container(OmegaConf.load(saved), resolve=True), config, free)
+    old = OmegaConf.to_container(OmegaConf.load(saved), resolve=True)
+    only_saved, only_new = sorted(set(old) - set(config)), sorted(set(config) - set(old))
+    if len(only_saved) >= 2 and len(only_new) >= 2:          # not a changed setting: another recipe's whole config
+        raise ValueError(f"{saved.parent} holds another recipe's run (its config.yaml has the sections {only_saved}, "
+                         f"this recipe's has {only_new} instead): choose another out_dir")
+    changes = config_changes(old, config, free)
     if changes and not allow:
         raise ValueError(f"resume=true with settings that differ from the run in {saved.parent}:\n  "
                          + "\n  ".join(changes)

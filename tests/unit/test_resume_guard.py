@@ -55,3 +55,14 @@ def test_demonstration_settings_are_free_only_when_neither_run_learns_from_demon
     imitating = {**RUN, "demos": {"path": "runs/demos", "loss": "push_cross_entropy"}}
     with pytest.raises(ValueError, match=r"demos\.loss: 'margin' -> 'push_cross_entropy'"):
         refuse_changed_config(saved, imitating, free=resumable(saved, imitating))
+
+
+def test_another_recipes_folder_is_named_not_diffed(tmp_path):
+    saved = tmp_path / "config.yaml"
+    saved.write_text(OmegaConf.to_yaml(OmegaConf.create(RUN)))
+    vqa = {"system": "random", "vqa": {"name": "counting"}, "train": {"lr": 1e-3}, "seed": 0, "out_dir": "runs/a"}
+    with pytest.raises(ValueError, match=r"holds another recipe's run .*'optim'.*\['system', 'train', 'vqa'\].*choose another out_dir"):
+        refuse_changed_config(saved, vqa)
+    one_new_section = {**RUN, "demos": {"weight": 2.0}}                     # a changed setting stays a changed setting
+    with pytest.raises(ValueError, match="demos.weight"):
+        refuse_changed_config(saved, one_new_section)
