@@ -11,7 +11,8 @@
 #     STUDENT_ROOT  a tools/train_student.sh folder (its dqn/ imitation run and demos_{0,1}/)
 #     OUT_ROOT      default runs/reward_variants: OUT_ROOT/<variant>/{dqn,stop}, OUT_ROOT/<variant>/eval with MQA_EVAL
 #     FRAMES        environment frames of DQN per variant after the imitation (default 600: 208 updates, the measured setting)
-#   MQA_VARIANTS="global local global_local" (default: all three), MQA_EVAL=<episodes per level> and
+#   MQA_VARIANTS="global local global_local" (default: the paper's three; any reward of recipes/conf/reward, e.g.
+#   countable for R_c), MQA_EVAL=<episodes per level> and
 #   MQA_BASELINE=<an earlier evaluation's out_dir> as in tools/train_student.sh.
 #
 # Each variant starts from the student's checkpoint as a new phase (train_dqn.py init_from=: weights, optimiser,
@@ -32,7 +33,10 @@ if ! compgen -G "$STUDENT/dqn/checkpoints/checkpoint-*" > /dev/null || [ ! -f "$
   exit 2
 fi
 for v in ${MQA_VARIANTS:-global local global_local}; do
-  case "$v" in global|local|global_local) ;; *) echo "unknown variant '$v': global, local or global_local" >&2; exit 2 ;; esac
+  if [ ! -f "recipes/conf/reward/$v.yaml" ]; then
+    echo "unknown variant '$v': one of $(cd recipes/conf/reward && ls *.yaml | sed 's/\.yaml$//' | tr '\n' ' ')" >&2
+    exit 2
+  fi
 done
 . tools/bootstrap.sh
 read -r SEED BASE_FRAMES < <(python -c "
