@@ -4,7 +4,7 @@ page's HTTP API (gradio_client, which downloads each frame as a browser does) on
 this process on 127.0.0.1. Optionally a screenshot of the page after an episode (headless Chromium).
 
     python benchmarks/demo_latency.py --dataset data/mqa [--episodes 6] [--level hard]
-    python benchmarks/demo_latency.py --runs runs --screenshot docs/figures/demo_screenshot.png
+    python benchmarks/demo_latency.py --runs checkpoints --policy dqn_geometric_student --screenshot docs/figures/demo_screenshot.png
 
 The episodes use the random baseline (the number of pushes is random too) on the level's questions;
 each visitor draws its own questions. "step" is the time between two successive frames, i.e. one
@@ -93,7 +93,7 @@ def measure(url: str, backend, users: int, episodes: int, level: str, seed: int)
               + "; step " + summary("", direct["step"]))
 
 
-def screenshot(url: str, backend, path: Path, level: str) -> None:
+def screenshot(url: str, backend, path: Path, level: str, policy: str | None) -> None:
     from mqa_rl.demo.page_driver import DemoPage, chromium
 
     driver = chromium(1400, 2500)
@@ -104,8 +104,8 @@ def screenshot(url: str, backend, path: Path, level: str) -> None:
         index = next(i for i, c in enumerate(cards) if c.difficulty == level)
         page.pick_scene(index)
         page.pick_question(0)
-        if backend.policies.trained:
-            page.pick_policy(backend.policies.trained[0])
+        if policy or backend.policies.trained:
+            page.pick_policy(policy or backend.policies.trained[0])
         shown = page.run()
         time.sleep(1.0)                                       # let the video player draw its first frame
         page.screenshot(path)
@@ -118,6 +118,10 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--dataset", default="data/mqa")
     ap.add_argument("--runs", default=None, help="folder of train_dqn runs (for the screenshot's policy)")
+    ap.add_argument("--policy", default=None, help="the screenshot's policy: the start of its name in the page's list "
+                                                   "(default: the first trained one)")
+    ap.add_argument("--vqa", nargs="*", default=None, help="VQA checkpoints the page answers with (default: the demo's, "
+                                                          "recipes/conf/demo.yaml)")
     ap.add_argument("--episodes", type=int, default=6, help="episodes per visitor")
     ap.add_argument("--level", default="hard", choices=["easy", "medium", "hard"])
     ap.add_argument("--max-pushes", type=int, default=10)
@@ -132,8 +136,9 @@ def main() -> None:
     from mqa_rl.demo.backend import DemoBackend, DemoConfig
 
     reward = OmegaConf.to_container(OmegaConf.load(ROOT / "recipes" / "conf" / "reward" / "global_local.yaml"))
+    vqa = args.vqa if args.vqa is not None else list(OmegaConf.load(ROOT / "recipes" / "conf" / "demo.yaml").vqa)
     t0 = time.perf_counter()
-    backend = DemoBackend(DemoConfig(dataset=args.dataset, reward=reward, runs=args.runs, cache_dir=args.cache_dir,
+    backend = DemoBackend(DemoConfig(dataset=args.dataset, reward=reward, runs=args.runs, vqa=tuple(vqa), cache_dir=args.cache_dir,
                                      max_pushes=args.max_pushes, sessions=2))
     print(f"server start-up (dataset check, 2 simulators, shader compile, {len(backend.catalog.cards)} scene images, "
           f"{len(backend.policies.trained)} trained policies): {time.perf_counter() - t0:.1f} s")
@@ -144,7 +149,7 @@ def main() -> None:
         for users in (1, 2):
             measure(url, backend, users, args.episodes, args.level, args.seed)
         if args.screenshot:
-            screenshot(url, backend, args.screenshot, args.level)
+            screenshot(url, backend, args.screenshot, args.level, args.policy)
     finally:
         demo.close()
         backend.close()

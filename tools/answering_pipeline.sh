@@ -1,18 +1,18 @@
 #!/usr/bin/env bash
 # The whole MQA pipeline at a quick CPU scale (recipes' `answering=quick` profile), after the dataset:
-#   1. train DQN(R_l) briefly (480 frames)                           -> runs/main/dqn_local
+#   1. train DQN(R_l) briefly (480 frames)                           -> runs/quick/dqn_local
 #   2. roll out random, no manipulation, DQN(R_l), privileged (40 train + 30 test COUNTING questions
-#      per level; random twice per training question)               -> runs/main/rollouts
-#   3. pretrain the VQA encoder on the random rollouts' frames       -> runs/main/encoder
-#   4. train one VQA per system on its rollouts                       -> runs/main/vqa
-#   5. Table III as measured (+ per type, policies, Fig. 7)           -> runs/main/report
-#   6. videos of greedy DQN(R_l) episodes with Q-map overlays         -> runs/main/videos
+#      per level; random twice per training question)               -> runs/quick/rollouts
+#   3. pretrain the VQA encoder on the random rollouts' frames       -> runs/quick/encoder
+#   4. train one VQA per system on its rollouts                       -> runs/quick/vqa
+#   5. Table III as measured (+ per type, policies, Fig. 7)           -> runs/quick/report
+#   6. videos of greedy DQN(R_l) episodes with Q-map overlays         -> runs/quick/videos
 # Every step resumes or skips what is done, so an interrupted run continues where it stopped.
 # Overrides for a smaller or relocated run: MQA_ROOT, MQA_EXTRA (all answering recipes),
 # MQA_DQN (train_dqn.py), MQA_PRETRAIN, MQA_VQA (extra arguments of those recipes).
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
-ROOT=${MQA_ROOT:-runs/main}
+ROOT=${MQA_ROOT:-runs/quick}
 read -r -a EXTRA <<< "${MQA_EXTRA:-}"
 read -r -a DQN <<< "${MQA_DQN:-collector.total_frames=480 collector.annealing_frames=320 collector.learning_starts=64 eval.interval_frames=480 eval.episodes=3 checkpoint.interval_frames=480 buffer.size=480}"
 read -r -a PRETRAIN <<< "${MQA_PRETRAIN:-train.steps=100 train.batch_size=16 train.eval_interval=50 frames.max_frames=600}"
