@@ -4,7 +4,7 @@ page's HTTP API (gradio_client, which downloads each frame as a browser does) on
 this process on 127.0.0.1. Optionally a screenshot of the page after an episode (headless Chromium).
 
     python benchmarks/demo_latency.py --dataset data/mqa [--episodes 6] [--level hard]
-    python benchmarks/demo_latency.py --runs checkpoints --policy dqn_geometric_student --screenshot docs/figures/demo_screenshot.png
+    python benchmarks/demo_latency.py --runs checkpoints --policy 'learned stop' --screenshot docs/figures/demo_screenshot.png
 
 The episodes use the random baseline (the number of pushes is random too) on the level's questions;
 each visitor draws its own questions. "step" is the time between two successive frames, i.e. one
@@ -104,8 +104,9 @@ def screenshot(url: str, backend, path: Path, level: str, policy: str | None) ->
         index = next(i for i, c in enumerate(cards) if c.difficulty == level)
         page.pick_scene(index)
         page.pick_question(0)
-        if policy or backend.policies.trained:
-            page.pick_policy(policy or backend.policies.trained[0])
+        trained = backend.policies.trained
+        if trained:
+            page.pick_policy(next((n for n in trained if policy in n), trained[0]) if policy else trained[0])
         shown = page.run()
         time.sleep(1.0)                                       # let the video player draw its first frame
         page.screenshot(path)
@@ -118,8 +119,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--dataset", default="data/mqa")
     ap.add_argument("--runs", default=None, help="folder of train_dqn runs (for the screenshot's policy)")
-    ap.add_argument("--policy", default=None, help="the screenshot's policy: the start of its name in the page's list "
-                                                   "(default: the first trained one)")
+    ap.add_argument("--policy", default=None, help="the screenshot's policy: a part of its name in the page's list, "
+                                                   "e.g. 'learned stop' (default: the first trained one)")
     ap.add_argument("--vqa", nargs="*", default=None, help="VQA checkpoints the page answers with (default: the demo's, "
                                                           "recipes/conf/demo.yaml)")
     ap.add_argument("--episodes", type=int, default=6, help="episodes per visitor")
