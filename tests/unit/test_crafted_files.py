@@ -72,3 +72,26 @@ def test_memmap_folders_with_a_pickled_leaf_are_refused(tmp_path):
     with pytest.raises(ValueError, match="nested/other.pickle.*never unpickled"):
         load_demonstrations(demos)
     assert RAN == []
+
+
+class _RecognitionNet:
+    class_head = object()          # what load_recognition checks before it reads the file
+
+
+@pytest.mark.parametrize("loader", ["stop critic", "VQA", "perception", "VQA encoder", "recognition"])
+def test_every_model_file_loader_refuses_a_pickled_payload(tmp_path, loader):
+    """The model files a user is handed (a stop critic, a VQA, the perception, an encoder, a recognition file), each
+    with a payload beside plausible keys: refused with ValueError naming the file, the payload never unpickled."""
+    from mqa_rl.modules.learned_stop import StopCritic
+    from mqa_rl.modules.perception import load_perception
+    from mqa_rl.modules.pretrained_recognition import load_recognition
+    from mqa_rl.modules.vqa import load_vqa
+    from mqa_rl.modules.vqa_encoder import load_encoder
+
+    path = tmp_path / "crafted.pt"
+    torch.save({"format": "anything", "version": 1, "state_dict": {}, "meta": Payload()}, path)
+    load = {"stop critic": StopCritic.load, "VQA": load_vqa, "perception": load_perception, "VQA encoder": load_encoder,
+            "recognition": lambda p: load_recognition(_RecognitionNet(), p, [])}[loader]
+    with pytest.raises(ValueError, match="crafted.pt"):
+        load(path)
+    assert RAN == []
