@@ -43,7 +43,7 @@ from mqa_rl.modules.perception import (PERCEPTION_FORMAT, PERCEPTION_VERSION, Co
 from mqa_rl.modules.vqa_encoder import standardise
 from mqa_rl.training.model_checkpoint import ModelCheckpoint
 from mqa_rl.training.resume_guard import RESUMABLE, refuse_changed_config
-from mqa_rl.training.run_dir import positive_ints, refuse_unresumable
+from mqa_rl.training.run_dir import RunLock, positive_ints, refuse_unresumable
 from mqa_rl.training.run_logger import RunLogger, trim_scalars
 from mqa_rl.training.signals import exit_on_sigterm
 from mqa_rl.training.vqa_data import scene_split
@@ -159,7 +159,11 @@ def augment(rgb: torch.Tensor, omap: torch.Tensor) -> tuple[torch.Tensor, torch.
 def train(cfg: DictConfig) -> dict:
     check_config(cfg)
     out = Path(cfg.out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    with RunLock(out, "train_perception.py"):       # one writer; a killed save's checkpoint stage goes
+        return _train(cfg, out)
+
+
+def _train(cfg: DictConfig, out: Path) -> dict:
     torch.manual_seed(cfg.seed)
     if cfg.threads:
         torch.set_num_threads(cfg.threads)

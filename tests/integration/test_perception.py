@@ -179,6 +179,11 @@ def test_frames_perception_and_counting_vqa_recipes_end_to_end(small_dataset, sp
         train.train(compose_recipe_config("train_perception", [*targs, "train.steps=2"]))
     with pytest.raises(ValueError, match="train.lr"):
         train.train(compose_recipe_config("train_perception", [*targs, "train.steps=4", "resume=true", "train.lr=0.5"]))
+    from mqa_rl.training.run_dir import RunLock
+
+    with RunLock(out, "train_perception.py"):                         # a second writer is refused at once
+        with pytest.raises(RuntimeError, match="another train_perception.py run is writing"):
+            train.train(compose_recipe_config("train_perception", [*targs, "train.steps=4", "resume=true"]))
     again = train.train(compose_recipe_config("train_perception", [*targs, "train.steps=4", "resume=true"]))
     assert again["steps"] == 4 and 0.0 <= again["calibrated_val_count_accuracy"] <= 1.0
     chosen = load_perception(out / "perception.pt")[1]["counting_calibration"]["chosen"]
