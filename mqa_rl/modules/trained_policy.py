@@ -21,14 +21,15 @@ from mqa_rl.verified_checkpoint import CheckpointCorrupt, IntegrityAdapter, newe
 RUN_KEYS = ("dataset", "env", "model", "reward")      # what every train_dqn.py config.yaml holds
 
 
-def read_run_config(run: str | Path):
+def read_run_config(run: str | Path, needs: tuple[str, ...] = RUN_KEYS):
     """The ``config.yaml`` of a ``recipes/train_dqn.py`` run folder (or an export of one); a clear error when the
-    folder has none, or when its config.yaml is another recipe's (an evaluation's, a VQA's)."""
+    folder has none, or when its config.yaml lacks the sections ``needs`` (another recipe's: an evaluation's, a
+    VQA's)."""
     path = Path(run) / "config.yaml"
     if not path.is_file():
         raise FileNotFoundError(f"{path} not found: run= must be a recipes/train_dqn.py output folder")
     cfg = OmegaConf.load(path)
-    missing = [k for k in RUN_KEYS if k not in cfg]
+    missing = [k for k in needs if k not in cfg]
     if missing:
         raise ValueError(f"{path} has no {', '.join(missing)}: {run} is another recipe's folder (an evaluation's, a "
                          f"stop fit's, a VQA's), not a recipes/train_dqn.py run; give run= a train_dqn.py out_dir")
@@ -54,7 +55,7 @@ def load_greedy(run: str | Path, checkpoint: str | Path | None, env):
     and action spec. Returns ``(actor, run_config, checkpoint_path)``.
     """
     run = Path(run)
-    cfg = read_run_config(run)
+    cfg = read_run_config(run, needs=("model",))          # all the network needs
     base = getattr(env, "base_env", env)
     net = make_push_qnet(cfg.model, vocab_size=env.observation_spec[keys.QUESTION].space.n,
                          camera_distance=base.camera.distance, num_classes=len(base.dataset.classes))
