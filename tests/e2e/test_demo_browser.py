@@ -15,6 +15,14 @@ from torch_threads import one_torch_thread  # noqa: F401
 from mqa_rl.demo.page_driver import BrowserMissing, DemoPage, chromium
 
 
+def open_browser():
+    """Debian's headless Chromium; a missing browser fails the test with the command that installs it."""
+    try:
+        return chromium()
+    except BrowserMissing as error:
+        pytest.fail(str(error))
+
+
 @pytest.fixture(scope="module")
 def served(small_dataset_dir, tmp_path_factory):
     mp = pytest.MonkeyPatch()
@@ -30,10 +38,7 @@ def served(small_dataset_dir, tmp_path_factory):
 @pytest.mark.timeout(300)
 def test_pick_scene_and_question_run_and_read_the_answer_in_chromium(served, tmp_path):
     backend, url = served
-    try:
-        driver = chromium()
-    except BrowserMissing as error:
-        pytest.fail(str(error))
+    driver = open_browser()
     try:
         page = DemoPage(driver, url)
         assert page.open() == len(backend.dataset.scenes)
@@ -85,10 +90,7 @@ def test_closing_the_page_mid_episode_frees_its_env(served, monkeypatch):
     backend, url = served
     slow = SlowPusher()
     monkeypatch.setitem(backend.policies.entries, RANDOM_MASKED, PolicyEntry(RANDOM_MASKED, actor=slow))
-    try:
-        driver = chromium()
-    except BrowserMissing as error:
-        pytest.fail(str(error))
+    driver = open_browser()
     try:
         page = DemoPage(driver, url)
         page.open()
