@@ -4,6 +4,7 @@
     python recipes/collect_rollouts.py system=dqn_local              # greedy DQN(R_l) from runs/local
     python recipes/collect_rollouts.py system=privileged splits=[test]
     python recipes/collect_rollouts.py system=random questions=all_types    # all four question types
+    python recipes/collect_rollouts.py system=random collection.backend=ray collection.workers=8 ray.address=auto
 
 Writes ``${root}/rollouts/<questions>/<system>/<split>`` (an ``EpisodeStore``: memmap chunks written
 atomically). Interrupted? Run the same command again: it collects only what is missing. Systems are
@@ -33,7 +34,7 @@ def collect(cfg: DictConfig) -> list[dict]:
         summary = collect_split(Path(cfg.out_dir) / split, split, dataset=cfg.dataset, policy=spec,
                                 questions=OmegaConf.to_container(cfg.questions),
                                 collection=OmegaConf.to_container(cfg.collection), overwrite=cfg.overwrite,
-                                progress=cfg.progress)
+                                progress=cfg.progress, ray_address=cfg.ray.address)
         print(f"{cfg.system} {split}: {summary}", flush=True)
         summaries.append(summary)
     return summaries

@@ -100,7 +100,8 @@ def evaluate_system(cfg: DictConfig, ds: MQADataset, name: str, plan_sha: str) -
             return missing(f"no complete test rollouts ({error})", f"python recipes/collect_rollouts.py system={name} "
                                                                    f"questions={q} 'splits=[test]'"), None, None
         collect_split(store, "test", dataset=ds, policy=spec, questions=OmegaConf.to_container(cfg.questions),
-                      collection=OmegaConf.to_container(cfg.collection), progress=cfg.progress)
+                      collection=OmegaConf.to_container(cfg.collection), progress=cfg.progress,
+                      ray_address=cfg.ray.address)
         records = load_records(store, EVAL_KEYS)
     collect_seconds = time.perf_counter() - t0
     if read_meta(store)["plan"]["questions_sha256"] != plan_sha:

@@ -31,29 +31,14 @@ import hydra
 import torch
 from omegaconf import DictConfig, OmegaConf
 
-from mqa_rl.envs.qmap_overlay import qmap_episode_frames
+from mqa_rl.collectors.ray_pool import check_backend
 from mqa_rl.envs.video import write_video
 from mqa_rl.evaluation.episode_metrics import mean_ci95
-from mqa_rl.evaluation.rollouts import run_episodes
+from mqa_rl.evaluation.policy_units import POLICIES, close_envs, run_units
 from mqa_rl.files import load_tensors, write_atomic
-from mqa_rl.modules.frozen_policies import make_frozen_policy
-from mqa_rl.modules.learned_stop import LearnedStop
-from mqa_rl.modules.random_policy import RandomMQAPolicy
-from mqa_rl.modules.stop_margin import StopMargin
-from mqa_rl.modules.trained_policy import load_greedy, read_run_config
-from mqa_rl.transforms.mqa_env import make_mqa_env
+from mqa_rl.modules.trained_policy import read_run_config
 from mqa_rl.transforms.push_memory import memory_radius
 
-# References that read the simulator (never a learned policy), as frozen-policy specs: the least-visible-first
-# oracle, the image teacher (its occluders and directions from visible pixels and depth alone; the students'
-# teacher), and the image teacher whose push is refined by simulating its direction from the 8 neighbouring
-# start cells (the shipped student's).
-ORACLES = {"oracle": {"kind": "privileged", "lookahead": 1},
-           "image_teacher": {"kind": "privileged", "lookahead": 1, "order": "visible_first", "geometry": "visible"},
-           "refined_teacher": {"kind": "privileged", "lookahead": 1, "order": "visible_first", "geometry": "visible",
-                               "refine_radius": 1}}
-# the reference that never pushes: the first image is the last (what a policy's pushes are worth beside nothing)
-NO_MANIPULATION = {"kind": "none"}
 REPORTED = ("reward", "pushes", "final_simple", "chi_end", "chi_change", "hidden_end", "into_view", "out_of_view",
             "countable_gain", "counter_stop", "counter_either", "stopped")
 
@@ -95,10 +80,14 @@ def reuse_baseline(folder, name: str, meta: dict) -> dict[str, torch.Tensor] | N
 def main(cfg: DictConfig) -> None:
     out = Path(cfg.out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    check_backend(cfg.backend)
     if "greedy" in cfg.policies and not cfg.run:
         raise ValueError("the greedy policy needs run=<a recipes/train_dqn.py output folder>")
     if cfg.stop_margin is not None and cfg.stop_critic is not None:
         raise ValueError("stop_margin and stop_critic are two stopping rules: give one of them")
+    unknown = [p for p in cfg.policies if p not in POLICIES]
+    if unknown:
+        raise ValueError(f"unknown policy {unknown[0]!r}; choose among {', '.join(POLICIES)}")
     run_cfg = read_run_config(cfg.run) if cfg.run else None
     dataset = cfg.dataset or (run_cfg.dataset if run_cfg else None)
     if dataset is None:
@@ -107,43 +96,33 @@ def main(cfg: DictConfig) -> None:
         OmegaConf.load(Path(__file__).parent / "conf" / "reward" / "global_local.yaml"))
     max_pushes = int(run_cfg.env.max_pushes) if run_cfg else 10
     qtypes = cfg.question_types or (list(run_cfg.env.question_types) if run_cfg else None)
-    threshold = float(reward.get("simple_threshold", 0.2))
     push_memory = memory_radius(cfg.push_memory, run_cfg.env if run_cfg else None)
-    results, lines = {}, []
+    setup = {"dataset": str(dataset), "reward": reward, "split": cfg.split, "qtypes": qtypes, "max_pushes": max_pushes,
+             "pusher": cfg.pusher, "push_memory": push_memory, "seed": int(cfg.seed), "episodes": int(cfg.episodes_per_level),
+             "threshold": float(reward.get("simple_threshold", 0.2)), "run": str(cfg.run) if cfg.run else None,
+             "checkpoint": cfg.checkpoint, "stop_margin": cfg.stop_margin, "stop_critic": cfg.stop_critic,
+             "video_episodes": int(cfg.video_episodes)}
+    metrics: dict = {}
+    units = []
     for level in cfg.difficulties:
-        env = make_mqa_env(str(dataset), reward, episode_stats=True, split=cfg.split, difficulties=[level],
-                           question_types=qtypes, max_pushes=max_pushes, pusher=cfg.pusher, push_memory=push_memory)
-        per_policy = {}
         meta = episodes_meta(cfg, dataset, level, qtypes, max_pushes, reward, push_memory)
         for name in cfg.policies:
-            env.base_env.set_seed(cfg.seed)                 # the same questions for every policy
-            on_episode = None
             reused = reuse_baseline(cfg.baseline_from, name, meta) if cfg.baseline_from and name != "greedy" else None
-            if name == "greedy":
-                policy, _, ckpt = load_greedy(Path(cfg.run), cfg.checkpoint, env)
-                if cfg.stop_margin is not None:
-                    policy = StopMargin(policy, float(cfg.stop_margin))
-                if cfg.stop_critic is not None:
-                    policy = LearnedStop.from_file(policy, cfg.stop_critic, max_pushes, push_memory)
-
-                def on_episode(i, rollout, level=level):
-                    if i < cfg.video_episodes:
-                        frames = qmap_episode_frames(rollout, env.base_env.camera, env.base_env.question.text)
-                        write_video(frames, out / "videos" / f"{level}_{i}.{cfg.video_format}")
-            elif name in ("random", "random_masked"):
-                policy = RandomMQAPolicy(max_pushes, seed=cfg.seed, masked=name == "random_masked")
-            elif name in ORACLES or name == "no_manipulation":
-                policy, _ = make_frozen_policy(ORACLES.get(name, NO_MANIPULATION), env.base_env, max_pushes)
+            if reused is not None:
+                metrics[level, name] = reused
             else:
-                raise ValueError(f"unknown policy {name!r}; choose among greedy, random, random_masked, no_manipulation, "
-                                 + ", ".join(ORACLES))
-            m = reused if reused is not None else run_episodes(
-                env, policy, cfg.episodes_per_level, max_pushes=max_pushes, simple_threshold=threshold, on_episode=on_episode)
-            buffer = io.BytesIO()
-            torch.save({"meta": meta, "metrics": m}, buffer)
-            write_atomic(out / "episodes" / f"{name}_{level}.pt", buffer.getvalue())
-            per_policy[name] = m
-            nan = torch.full((cfg.episodes_per_level,), float("nan"))
+                units.append((level, name))
+    try:
+        if units:
+            for unit, result in run_units(setup, units, cfg.backend, cfg.ray.address, int(cfg.workers)):
+                record_unit(out, cfg, dataset, qtypes, max_pushes, reward, push_memory, metrics, unit, result)
+    finally:
+        close_envs()
+    results, lines = {}, []
+    nan = torch.full((cfg.episodes_per_level,), float("nan"))
+    for level in cfg.difficulties:
+        per_policy = {name: metrics[level, name] for name in cfg.policies}
+        for name, m in per_policy.items():
             results.setdefault(level, {})[name] = {k: dict(zip(("mean", "ci95", "n"), mean_ci95(m.get(k, nan))))
                                                    for k in REPORTED}
             print(f"{level:>6} {name:>13}: " + ", ".join(f"{k} {shown(results[level][name][k], sep='±')}" for k in REPORTED),
@@ -153,7 +132,6 @@ def main(cfg: DictConfig) -> None:
                 diff = {k: dict(zip(("mean", "ci95", "n"), mean_ci95(per_policy["greedy"][k] - per_policy[base].get(k, nan))))
                         for k in REPORTED}
                 results[level][f"greedy-{base}"] = diff
-        env.close()
     for level, rows in results.items():
         lines.append(f"\n### {level}\n\n| policy | " + " | ".join(REPORTED) + " |\n|---|" + "---|" * len(REPORTED))
         for name, row in rows.items():
@@ -163,6 +141,19 @@ def main(cfg: DictConfig) -> None:
         write_atomic(out / name, text)
     print("\n".join(lines))
     print(f"written to {out}")
+
+
+def record_unit(out: Path, cfg, dataset, qtypes, max_pushes, reward, push_memory, metrics: dict, unit, result) -> None:
+    """Write one finished unit's episodes (and videos) at once: a killed evaluation keeps what finished."""
+    (level, name), (m, videos) = unit, result
+    meta = episodes_meta(cfg, dataset, level, qtypes, max_pushes, reward, push_memory)
+    buffer = io.BytesIO()
+    torch.save({"meta": meta, "metrics": m}, buffer)
+    write_atomic(out / "episodes" / f"{name}_{level}.pt", buffer.getvalue())
+    for i, frames in enumerate(videos):
+        write_video(frames, out / "videos" / f"{level}_{i}.{cfg.video_format}")
+    metrics[level, name] = m
+    print(f"  {level} {name}: {len(next(iter(m.values())))} episodes", flush=True)
 
 
 if __name__ == "__main__":

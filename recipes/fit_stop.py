@@ -6,7 +6,9 @@
 The policy pushes greedily without stopping (its best allowed push, ``env.max_pushes`` times) over
 ``episodes_per_level`` training questions per level; every state's features (``stop_features``) and the
 targets' χ are kept (``trajectories/<level>.pt``, written per level: an interrupted run continues with the
-missing levels). A ``StopCritic`` is fitted by optimal stopping (``mqa_rl.training.optimal_stopping``) on
+missing levels). ``value=chi`` (the default) stops where the targets' mean χ is lowest; ``value=uncountable`` where
+the fewest targets are below the perfect counter's line (the share of targets a counter misses: what R_c
+rewards, issue 40). A ``StopCritic`` is fitted by optimal stopping (``mqa_rl.training.optimal_stopping``) on
 the episodes of 80 % of the training scenes and scored on the other 20 % against the fixed rules (stop at
 once, after k pushes, never) and the hindsight best; then refitted on all episodes and written as
 ``stop_critic.pt`` with that report (``report.json``). The test split is never read.
@@ -30,14 +32,28 @@ from mqa_rl.modules.learned_stop import FEATURES, policy_fingerprint, policy_net
 from mqa_rl.modules.stop_margin import StopMargin
 from mqa_rl.modules.trained_policy import load_greedy, read_run_config
 from mqa_rl.training.optimal_stopping import fit_stop_critic, fixed_rules, stopped_chi
-from mqa_rl.transforms.episode_stats import mean_target_chi
+from mqa_rl.transforms.episode_stats import mean_target_chi, targets_in_view
+
+VALUES = ("chi", "uncountable")     # what the stop minimises; both are kept per state
+
+
+def uncountable_share(td) -> torch.Tensor:
+    """[...]: the share of the question's targets below the perfect counter's line (0 without targets)."""
+    targets = td.get(keys.TARGET_MASK)
+    missed = (targets & ~targets_in_view(td)).sum(-1).to(torch.float32)
+    return missed / targets.sum(-1).clamp(min=1)
 from mqa_rl.transforms.mqa_env import make_mqa_env
 from mqa_rl.transforms.push_memory import memory_radius
 
 
 def collect_level(env, policy, net, episodes: int, max_pushes: int) -> dict:
-    """Never-stopping episodes of ``policy``: features [E, T, F], χ [E, T + 1], valid [E, T], scene ids."""
-    feats, chis, valid, scenes = [], [], [], []
+    """Never-stopping episodes of ``policy``: features [E, T, F], χ and the uncountable share [E, T + 1],
+    valid [E, T], scene ids."""
+    feats, chis, missed, valid, scenes = [], [], [], [], []
+
+    def padded(x):
+        return torch.cat([x, x[-1:].expand(pad)]) if pad > 0 else x[: max_pushes + 1]
+
     with torch.no_grad():
         for _ in range(episodes):
             rollout = env.rollout(max_pushes + 1, policy, break_when_any_done=True)
@@ -46,15 +62,19 @@ def collect_level(env, policy, net, episodes: int, max_pushes: int) -> dict:
             steps = rollout.shape[0]
             f = stop_features(net, rollout, max_pushes)
             chi = torch.cat([mean_target_chi(rollout).squeeze(-1), mean_target_chi(rollout["next"][-1:]).squeeze(-1)])
+            miss = torch.cat([uncountable_share(rollout), uncountable_share(rollout["next"][-1:])])
             pad = max_pushes - steps
             feats.append(torch.cat([f, f[-1:].expand(pad, -1)]) if pad > 0 else f[:max_pushes])
-            chis.append(torch.cat([chi, chi[-1:].expand(pad)]) if pad > 0 else chi[: max_pushes + 1])
+            chis.append(padded(chi))
+            missed.append(padded(miss))
             valid.append(torch.arange(max_pushes) < min(steps, max_pushes))
             scenes.append(env.base_env.question.scene_id)
     if not feats:
         return {"features": torch.zeros(0, max_pushes, len(FEATURES)), "chi": torch.zeros(0, max_pushes + 1),
-                "valid": torch.zeros(0, max_pushes, dtype=torch.bool), "scenes": []}
-    return {"features": torch.stack(feats), "chi": torch.stack(chis), "valid": torch.stack(valid), "scenes": scenes}
+                "uncountable": torch.zeros(0, max_pushes + 1), "valid": torch.zeros(0, max_pushes, dtype=torch.bool),
+                "scenes": []}
+    return {"features": torch.stack(feats), "chi": torch.stack(chis), "uncountable": torch.stack(missed),
+            "valid": torch.stack(valid), "scenes": scenes}
 
 
 def held_out(scenes: list[str], fraction: float) -> torch.Tensor:
@@ -63,8 +83,8 @@ def held_out(scenes: list[str], fraction: float) -> torch.Tensor:
     return torch.tensor([int(hashlib.sha256(s.encode()).hexdigest(), 16) % 1000 < cut for s in scenes])
 
 
-def score(critic, data: dict, rows: torch.Tensor) -> dict:
-    f, chi, valid = data["features"][rows], data["chi"][rows], data["valid"][rows]
+def score(critic, data: dict, rows: torch.Tensor, value: str = "chi") -> dict:
+    f, chi, valid = data["features"][rows], data[value][rows], data["valid"][rows]
     with torch.no_grad():
         stop = (critic(f) >= 0) & valid
     return {"episodes": int(rows.sum()), "learned": float(stopped_chi(chi, stop, valid).mean()),
@@ -84,6 +104,9 @@ def cached_trajectories(path: Path, meta: dict) -> dict | None:
 def main(cfg: DictConfig) -> None:
     if not cfg.run or not cfg.out_dir:
         raise ValueError("give run=<a recipes/train_dqn.py run or exported policy folder> and out_dir=<where to write>")
+    if cfg.value not in VALUES:
+        raise ValueError(f"value={cfg.value!r}: the stop minimises one of {list(VALUES)} (the targets' mean χ, or the "
+                         "share of targets a perfect counter misses)")
     if cfg.split == "test":
         raise ValueError("split=test: a stop rule fitted on the test split would be judged on what it was fitted to; "
                          "fit on split=train")
@@ -104,7 +127,8 @@ def main(cfg: DictConfig) -> None:
             net = policy_net(actor)
             meta = {"run": str(run.resolve()), "checkpoint": Path(checkpoint).name, "policy_fingerprint": policy_fingerprint(net),
                     "dataset": str(Path(dataset).resolve()), "split": cfg.split, "level": level, "seed": int(cfg.seed),
-                    "episodes": int(cfg.episodes_per_level), "max_pushes": max_pushes, "push_memory": push_memory}
+                    "episodes": int(cfg.episodes_per_level), "max_pushes": max_pushes, "push_memory": push_memory,
+                    "measures": list(VALUES)}
             path = out / "trajectories" / f"{level}.pt"
             reused = cached_trajectories(path, meta)
             if reused is not None:
@@ -121,7 +145,8 @@ def main(cfg: DictConfig) -> None:
             print(f"{level}: {data['chi'].shape[0]} episodes with targets in {time.time() - tick:.0f} s", flush=True)
         finally:
             env.close()
-    data = {k: torch.cat([levels[lv][k] for lv in levels]) for k in ("features", "chi", "valid")}
+    value = str(cfg.value)
+    data = {k: torch.cat([levels[lv][k] for lv in levels]) for k in ("features", *VALUES, "valid")}
     data["scenes"] = [s for lv in levels for s in levels[lv]["scenes"]]
     if data["chi"].shape[0] == 0:
         raise ValueError(f"no episode had a target of its question (counts of 0): raise episodes_per_level "
@@ -132,23 +157,26 @@ def main(cfg: DictConfig) -> None:
     hold = held_out(data["scenes"], float(cfg.holdout_fraction))
     report = {"collect_and_fit_s": None, "fit_episodes": int((~hold).sum()), "held_out_episodes": int(hold.sum())}
     if hold.any() and (~hold).any():
-        part = {k: data[k][~hold] for k in ("features", "chi", "valid")}
-        critic, history = fit_stop_critic(part["features"], part["chi"], part["valid"], **fit_options)
+        part = {k: data[k][~hold] for k in ("features", value, "valid")}
+        critic, history = fit_stop_critic(part["features"], part[value], part["valid"], **fit_options)
         report["validation"] = {"history": history}
         for i, level in enumerate(levels):
-            report["validation"][level] = {"fit": score(critic, data, ~hold & (level_of == i)),
-                                           "held_out": score(critic, data, hold & (level_of == i))}
-    critic, history = fit_stop_critic(data["features"], data["chi"], data["valid"], **fit_options)
-    report["final"] = {"history": history, **{lv: score(critic, data, level_of == i) for i, lv in enumerate(levels)}}
+            report["validation"][level] = {"fit": score(critic, data, ~hold & (level_of == i), value),
+                                           "held_out": score(critic, data, hold & (level_of == i), value)}
+    critic, history = fit_stop_critic(data["features"], data[value], data["valid"], **fit_options)
+    report["value"] = value
+    report["final"] = {"history": history, **{lv: score(critic, data, level_of == i, value) for i, lv in enumerate(levels)}}
     report["collect_and_fit_s"] = round(time.time() - started, 1)
     meta = {"policy_fingerprint": policy_fingerprint(net), "run": str(run), "checkpoint": Path(checkpoint).name,
-            "split": cfg.split, "episodes": int(data["chi"].shape[0]), "fit": fit_options, "push_memory": push_memory}
+            "split": cfg.split, "episodes": int(data["chi"].shape[0]), "fit": fit_options, "push_memory": push_memory,
+            "value": value}
     critic.save(out / "stop_critic.pt", meta)
     write_atomic(out / "report.json", json.dumps(report, indent=2))
     write_atomic(out / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))   # with the results it made, not before
 
     rules = ("after_0", "after_1", "after_3", f"after_{max_pushes}", "hindsight")
-    print("mean final χ of the targets (held-out training scenes where a level has some; lower is better):")
+    what = "χ of the targets" if value == "chi" else "share of targets below the counter's line"
+    print(f"mean final {what} (held-out training scenes where a level has some; lower is better):")
     print(f"{'level':>7} {'learned':>8} {'pushes':>7} " + " ".join(f"{r:>10}" for r in rules))
     for level in levels:
         row = report.get("validation", {}).get(level, {}).get("held_out")

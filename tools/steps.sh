@@ -1,6 +1,7 @@
 # Helpers of the multi-step scripts in tools/; sourced, not run.
 #   step MESSAGE        prints MESSAGE with the time since the sourcing script started
-#   fit_own_stop ROOT   the stop learnt from ROOT/dqn's own pushes on the train split -> ROOT/stop (skipped when done)
+#   fit_own_stop ROOT   the stop learnt from ROOT/dqn's own pushes on the train split -> ROOT/stop (skipped when done);
+#                       MQA_STOP_VALUE=uncountable: it minimises the share of targets a counter misses, not χ
 #   evaluate_on_test ROOT   with MQA_EVAL=<episodes per level>: greedy + learned stop vs random on the test split
 #                       -> ROOT/eval (MQA_BASELINE=<an earlier evaluation's out_dir>: reuse its random episodes)
 # Both run the policy with its run's push memory (fit_stop.py and evaluate_policy.py read it from ROOT/dqn).
@@ -9,7 +10,7 @@ step() { echo "=== [$(( (SECONDS - start) / 60 )) min $(( (SECONDS - start) % 60
 fit_own_stop() {
   if [ ! -f "$1/stop/stop_critic.pt" ]; then
     step "its stop, from its own pushes on the train split -> $1/stop"
-    python recipes/fit_stop.py "run=$1/dqn" episodes_per_level=100 "out_dir=$1/stop"
+    python recipes/fit_stop.py "run=$1/dqn" episodes_per_level=100 "value=${MQA_STOP_VALUE:-chi}" "out_dir=$1/stop"
   fi
 }
 evaluate_on_test() {

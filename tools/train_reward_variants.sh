@@ -2,7 +2,7 @@
 # The paper's three reward variants as DQN from demonstrations (DQfD): each one continues a finished imitation
 # student (tools/train_student.sh ROOT SEED) with DQN on its own reward — R_g (global), R_l (local), R_g+R_l
 # (global_local) — the demonstrations' loss beside every update, as DQfD does; then its stop is learnt
-# from its own pushes like the student's. The paper's variants trained from scratch on our CPU budget do not
+# from its own pushes like the student's (a variant with R_c learns a stop that minimises the targets a counter misses). The paper's variants trained from scratch on our CPU budget do not
 # uncover the targets (docs/results.md, "Where the policy stands"); these start from a policy that does. The RL phase is
 # gentle (profile=dqfd: lr 1e-4, demonstration weight 2.0): at the student's 5e-4 / 0.5 it undid the
 # imitation (docs/notebook/policy_attempts.md, sixteenth and seventeenth attempts).
@@ -45,6 +45,7 @@ c = OmegaConf.load(sys.argv[1]); print(c.seed, c.collector.total_frames)" "$STUD
 . tools/steps.sh
 for v in ${MQA_VARIANTS:-global local global_local}; do
   run="$OUT/$v"
+  case "$v" in *countable*) export MQA_STOP_VALUE=uncountable ;; *) export MQA_STOP_VALUE=chi ;; esac   # what its stop minimises
   step "DQN($v): $FRAMES frames with its reward beside the demonstrations, from $STUDENT/dqn -> $run/dqn"
   python recipes/train_dqn.py dataset=data/mqa "reward=$v" profile=dqfd "init_from=$STUDENT/dqn" \
     "demos.path=[$STUDENT/demos_0,$STUDENT/demos_1]" "seed=$SEED" "out_dir=$run/dqn" resume=true \

@@ -3,7 +3,11 @@
 # "Twelfth", "Thirteenth" and "Fifteenth attempt"):
 #   1. the image teacher's demonstrations on the train split, two processes at once (2 x 600 states, ~1.5 min)
 #      (MQA_TEACHER=refined: the refined teacher instead, its push the best of 9 simulated starts: 9-11.5 min,
-#       the chain 22-24 min; its students beat random on hard in 3 runs of 5, the image teacher's in 4 of 4)
+#       the chain 22-24 min; its students beat random on hard in 3 runs of 5, the image teacher's in 4 of 4;
+#       MQA_TEACHER=countable: the countable teacher (issue 40): the refined oracle reading the full silhouettes,
+#       serving the least visible target until the perfect counter's 20-px line, stopping when no simulated push
+#       shows the targets better (~1 s per state); the student on R_c (reward=countable), its stop learnt on the
+#       share of targets a counter misses, fit_stop.py value=uncountable)
 #   2. the geometric student imitating them (profile=student: 2,500 updates, the shipped recognition)
 #   3. its stop, learnt from its own never-stopping episodes on the train split (recipes/fit_stop.py)
 #   4. with MQA_EVAL=<episodes per level>: greedy + learned stop vs random on the test split
@@ -19,11 +23,18 @@
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 TEACHER=${MQA_TEACHER:-image}
+ORACLE=(oracle.min_visible_fraction=0.3 oracle.require_gain=false oracle.geometry=visible oracle.order=visible_first)
+REWARD=global
+export MQA_STOP_VALUE=chi
 case "$TEACHER" in
   image) REFINE=0 ;;        # the push the image and the segmentation say, no previews
   refined) REFINE=1 ;;      # the image teacher's push, the best of 9 simulated starts
-  *) echo "MQA_TEACHER must be 'image' or 'refined', got '${TEACHER}'" >&2; exit 2 ;;
+  countable) REFINE=1; REWARD=countable; MQA_STOP_VALUE=uncountable
+    ORACLE=(oracle.min_visible_fraction=0.0 oracle.require_gain=true oracle.geometry=full oracle.order=least_visible) ;;
+  *) echo "MQA_TEACHER must be 'image', 'refined' or 'countable', got '${TEACHER}'" >&2; exit 2 ;;
 esac
+# the teacher a demonstration set was collected with, as demos.json records it
+WANT="$REFINE $(printf '%s\n' "${ORACLE[@]}" | cut -d= -f2 | tr '\n' ' ' | sed 's/ $//')"
 . tools/bootstrap.sh
 ROOT=${1:-runs/student}
 SEED=${2:-0}
@@ -33,9 +44,12 @@ shift $(( $# < 2 ? $# : 2 ))
 for k in 0 1; do
   demos="$ROOT/demos_$k/demos.json"
   if [ -f "$demos" ]; then
-    have=$(python -c "import json, sys; print(json.load(open(sys.argv[1]))['oracle']['refine_radius'])" "$demos")
-    if [ "$have" != "$REFINE" ]; then
-      echo "$ROOT/demos_$k holds demonstrations with oracle.refine_radius=$have, not the $TEACHER teacher's ($REFINE):" \
+    have=$(python -c "
+import json, sys; o = json.load(open(sys.argv[1]))['oracle']
+print(o['refine_radius'], float(o['min_visible_fraction']), str(o.get('require_gain', False)).lower(), o['geometry'], o['order'])" "$demos")
+    if [ "$have" != "$WANT" ]; then
+      echo "$ROOT/demos_$k holds demonstrations of another teacher (oracle refine_radius, min_visible_fraction," \
+           "require_gain, geometry, order = $have), not the $TEACHER teacher's ($WANT):" \
            "choose another ROOT, set MQA_TEACHER to match, or remove $ROOT/demos_$k" >&2
       exit 2
     fi
@@ -49,7 +63,7 @@ pids=()
 for k in 0 1; do
   if [ ! -f "$ROOT/demos_$k/demos.json" ]; then
     python recipes/collect_demonstrations.py "states=${MQA_DEMO_STATES:-600}" "seed=$(( 2 * SEED + k + 100 ))" \
-      "oracle.refine_radius=$REFINE" progress=false \
+      "oracle.refine_radius=$REFINE" "${ORACLE[@]}" progress=false \
       "out_dir=$ROOT/demos_$k" &
     pids+=($!)
   fi
@@ -57,7 +71,7 @@ done
 for p in "${pids[@]}"; do wait "$p"; done
 
 step "the geometric student: imitation updates -> $ROOT/dqn"
-python recipes/train_dqn.py dataset=data/mqa reward=global profile=student \
+python recipes/train_dqn.py dataset=data/mqa "reward=$REWARD" profile=student \
   "demos.path=[$ROOT/demos_0,$ROOT/demos_1]" "seed=$SEED" "out_dir=$ROOT/dqn" resume=true "$@"
 
 fit_own_stop "$ROOT"

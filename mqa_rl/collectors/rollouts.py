@@ -10,12 +10,15 @@ drawn with ``seed``), each rolled out ``repeats`` times (once for a deterministi
 replays bit-identically, so repeats would be copies). Slot ``i·repeats + r`` is question i's r-th
 rollout; its episode is seeded from (seed, slot), so a slot gives the same episode whichever worker
 runs it and whenever. Episodes run in ``workers`` spawned processes (each builds its env and policy
-once; one torch thread each), and are written in chunks to an ``EpisodeStore`` (atomic, resumable:
-run the same call again after an interruption). Workers exit by themselves if the parent is killed.
+once; one torch thread each), or with ``backend="ray"`` in as many Ray actors of one CPU each, on the
+cluster at ``ray_address`` or a local Ray (``mqa_rl.collectors.ray_pool``: a dead actor's episode is run
+again elsewhere). Only this process writes, in chunks to an ``EpisodeStore`` (atomic, resumable: run the
+same call again after an interruption). Local workers exit by themselves if the parent is killed.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import multiprocessing as mp
@@ -33,6 +36,7 @@ from tqdm import tqdm
 from mqa_rl import keys
 from mqa_rl.data.dataset import LEVELS, MQADataset, dataset_fingerprint
 from mqa_rl.data.questions import QUESTION_TYPES
+from mqa_rl.collectors.ray_pool import RayPool, check_backend, ray_session
 from mqa_rl.collectors.store import EpisodeStore
 from mqa_rl.envs.sapien_bin import SapienBinEnv
 from mqa_rl.modules.frozen_policies import is_deterministic, make_frozen_policy, resolve_checkpoint
@@ -157,6 +161,11 @@ def _worker_init(dataset_root: str, env_kwargs: dict, spec: dict, run: dict, par
     _WORKER.update(_build(dataset_root, env_kwargs, spec, run))
 
 
+def _ray_worker_init(dataset_root: str, env_kwargs: dict, spec: dict, run: dict) -> None:
+    torch.set_num_threads(1)              # a Ray actor is not our child: Ray ends it with the run
+    _WORKER.update(_build(dataset_root, env_kwargs, spec, run))
+
+
 def _worker_episode(task: tuple[int, int, int]) -> dict:
     # numpy, not tensors: torch would pass tensors as shared-memory file descriptors, ~25 per record,
     # and a chunk's worth of records in flight can exceed a 1024 open-files limit
@@ -184,11 +193,12 @@ def collect_rollouts(out_dir, *, dataset, policy, split: str, question_types=("c
                      max_per_group: int | None = None, repeats: int = 1, max_pushes: int = 10, image_size: int = 224,
                      pusher: str = "finger", workers: int = 2, chunk_episodes: int = 32, seed: int = 0,
                      store_depth: bool = True, store_object_map: bool = True, overwrite: bool = False,
-                     progress: bool = True) -> dict:
+                     progress: bool = True, backend: str = "local", ray_address: str | None = None) -> dict:
     """Collect (or finish collecting) the rollouts of ``policy`` (a spec, see ``frozen_policies``) into
     ``out_dir``; returns a summary with the time taken. See the module docstring."""
     if repeats < 1 or chunk_episodes < 1:
         raise ValueError(f"repeats ({repeats}) and chunk_episodes ({chunk_episodes}) must be ≥ 1")
+    check_backend(backend, "collection.backend")
     ds = dataset if isinstance(dataset, MQADataset) else MQADataset(dataset)
     spec = resolve_checkpoint(policy)
     question_types = list(question_types)
@@ -209,14 +219,19 @@ def collect_rollouts(out_dir, *, dataset, policy, split: str, question_types=("c
             "slots": len(tasks)}
     t0 = time.perf_counter()
     new = pushes = 0
-    with EpisodeStore(out_dir, meta, overwrite=overwrite) as store:
+    with EpisodeStore(out_dir, meta, overwrite=overwrite) as store, \
+            (ray_session(ray_address, num_cpus=workers) if backend == "ray" else contextlib.nullcontext()):
         done = store.done_slots()
         todo = [t for t in tasks if t[0] not in done]
         initargs = (str(ds.root), env_kwargs, spec, run, os.getpid())
         # a worker costs ~10 s to start (imports, SAPIEN, shader compile): not worth it for a few episodes
-        in_process = workers <= 1 or len(todo) < IN_PROCESS_BELOW
-        pool = _InProcess(*initargs) if in_process else \
-            mp.get_context("spawn").Pool(min(workers, len(todo)), initializer=_worker_init, initargs=initargs)
+        in_process = backend == "local" and (workers <= 1 or len(todo) < IN_PROCESS_BELOW)
+        if backend == "ray":
+            pool = RayPool(max(1, min(workers, len(todo))), _ray_worker_init, initargs[:-1])
+        elif in_process:
+            pool = _InProcess(*initargs)
+        else:
+            pool = mp.get_context("spawn").Pool(min(workers, len(todo)), initializer=_worker_init, initargs=initargs)
         bar = tqdm(total=len(tasks), initial=len(done), unit="episode", dynamic_ncols=True, disable=not progress,
                    desc=f"{spec['kind']} {split}")
         buffer: list[TensorDict] = []
@@ -239,16 +254,17 @@ def collect_rollouts(out_dir, *, dataset, policy, split: str, question_types=("c
     seconds = time.perf_counter() - t0
     summary = {"out_dir": str(out_dir), "episodes": len(tasks), "collected_now": new, "already_there": len(done),
                "seconds": round(seconds, 1), "episodes_per_s": round(new / seconds, 3) if new else None,
-               "pushes_per_s": round(pushes / seconds, 3) if new else None, "workers": workers}
+               "pushes_per_s": round(pushes / seconds, 3) if new else None, "workers": workers, "backend": backend}
     with open(Path(out_dir) / "collect_log.jsonl", "a") as f:
         f.write(json.dumps(summary) + "\n")
     return summary
 
 
 def collect_split(out_dir, split: str, *, dataset, policy, questions, collection, overwrite: bool = False,
-                  progress: bool = True) -> dict:
+                  progress: bool = True, ray_address: str | None = None) -> dict:
     """``collect_rollouts`` from the recipes' config sections: ``questions`` (types, max_per_group per
-    split) and ``collection`` (repeats per split, workers, chunk_episodes, seed, store_*, env)."""
+    split) and ``collection`` (repeats per split, workers, chunk_episodes, seed, store_*, env, backend);
+    ``ray_address``: the recipes' ``ray.address``."""
     for section, key in ((collection["repeats"], "collection.repeats"), (questions["max_per_group"], "questions.max_per_group")):
         if split not in section:
             raise ValueError(f"split {split!r}: give {key}.{split}")
@@ -259,4 +275,5 @@ def collect_split(out_dir, split: str, *, dataset, policy, questions, collection
         max_pushes=int(env["max_pushes"]), image_size=int(env["image_size"]), pusher=env["pusher"],
         workers=int(collection["workers"]), chunk_episodes=int(collection["chunk_episodes"]), seed=int(collection["seed"]),
         store_depth=bool(collection["store_depth"]), store_object_map=bool(collection["store_object_map"]),
-        overwrite=overwrite, progress=progress)
+        overwrite=overwrite, progress=progress, backend=collection.get("backend", "local"),
+        ray_address=ray_address)

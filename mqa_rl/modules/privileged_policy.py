@@ -18,6 +18,10 @@ image (and its segmentation), where the default reads the full silhouettes, whic
 ``refine_radius=r`` then simulates the chosen push's direction from every start within r grid cells
 and takes the one that shows the targets best (the best of the 8 neighbours uncovers twice what the image
 teacher's own push does: docs/notebook/policy_attempts.md, after the fifth attempt).
+``require_gain=True`` stops instead of pushing when the best simulated push would not show the targets better
+than they show now (needs previews: ``lookahead > 1`` or ``refine_radius > 0``): with ``min_visible_fraction=0``
+(a target is served until the perfect counter's ``min_visible_px`` line) this is the countable teacher, which never
+buries a counted target for nothing (issue 40's R_c: what the answer needs, not χ).
 """
 
 from __future__ import annotations
@@ -47,8 +51,12 @@ class PrivilegedPushPolicy:
     def __init__(self, env, min_visible_px: int = 20, min_visible_fraction: float = 0.3,
                  max_tries_per_occluder: int = 2, finger_gap_px: float = 3.0, lookahead: int = 6,
                  order: str = "least_visible", geometry: str = "full",
-                 border_px: int = 4, refine_radius: int = 0):
+                 border_px: int = 4, refine_radius: int = 0, require_gain: bool = False):
         self.env = env
+        if require_gain and lookahead <= 1 and refine_radius <= 0:
+            raise ValueError("require_gain=True compares simulated pushes with the present state: it needs previews "
+                             "(lookahead > 1 or refine_radius > 0)")
+        self.require_gain = bool(require_gain)
         if refine_radius < 0:
             raise ValueError(f"refine_radius must be >= 0 grid cells, got {refine_radius}")
         self.refine_radius = int(refine_radius)
@@ -80,27 +88,30 @@ class PrivilegedPushPolicy:
         candidates = self.candidates(gt)
         if not candidates:
             return actions.STOP
+        best_score = -np.inf
         if self.lookahead <= 1 or len(candidates) == 1:
             best = candidates[0]
         else:
             scores = [self.score(self.env.preview(a[0]), gt["target"]) for a in candidates[: self.lookahead]]
-            best = candidates[int(np.argmax(scores))]
+            best, best_score = candidates[int(np.argmax(scores))], max(scores)
         action, pair = best
         if self.refine_radius:
-            action = self.refine(action, gt["target"])
+            action, best_score = self.refine(action, gt["target"])
         self._tries[pair] = self._tries.get(pair, 0) + 1
+        if self.require_gain and best_score <= self.score(gt, gt["target"]):
+            return actions.STOP
         return action
 
-    def refine(self, action: int, target: np.ndarray) -> int:
+    def refine(self, action: int, target: np.ndarray) -> tuple[int, float]:
         """Of ``action`` and its direction started from the cells within ``refine_radius``, the push
-        whose simulated outcome shows the targets best (the first such, ``action`` on ties)."""
+        whose simulated outcome shows the targets best (the first such, ``action`` on ties), and its score."""
         d, row, col = actions.decode(action)
         r = self.refine_radius
         starts = [actions.encode(d, row + dr, col + dc) for dr in range(-r, r + 1) for dc in range(-r, r + 1)
                   if 0 <= row + dr < actions.GRID and 0 <= col + dc < actions.GRID]
         starts.sort(key=lambda a: a != action)
         scores = [self.score(self.env.preview(a), target) for a in starts]
-        return starts[int(np.argmax(scores))]
+        return starts[int(np.argmax(scores))], max(scores)
 
     def score(self, m: dict, target: np.ndarray) -> float:
         """How well the targets can be seen: revealed targets, then their mean visible fraction."""

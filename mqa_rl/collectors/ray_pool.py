@@ -1,0 +1,153 @@
+"""Episodes past one machine: a pool of Ray actors with ``multiprocessing.Pool``'s interface.
+
+    with ray_session(address="auto"):          # join a cluster (``auto`` or ``host:port``); None: a local Ray
+        pool = RayPool(workers=4, initializer=build, initargs=(...,))
+        for result in pool.imap_unordered(fn, tasks):
+            ...
+        pool.terminate()
+
+Each actor runs ``initializer(*initargs)`` once (it builds its env and policy) and then ``fn(task)`` for
+the tasks it is handed, one at a time, in a process whose module globals hold what the initializer built,
+as a pool worker's do. The driver keeps one task in flight per actor and hands the next one to whichever
+actor finishes first, so a slow node takes fewer. A task whose actor dies (its process killed, its node
+lost) is handed to another actor, and a new actor replaces the dead one (up to ``max_replacements``): the
+caller, which alone writes results, sees every task's result exactly once, so nothing is lost or
+duplicated. The actors are the TorchRL-free half of the Ray backend; DQN training uses TorchRL's own
+``RayCollector`` (``mqa_rl.collectors.factory``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator
+from pathlib import Path
+
+BACKENDS = ("local", "ray")
+RAY_EXTRA = ("the Ray backend needs the 'ray' extra: pip install -e '.[ray]' (tools/bootstrap.sh installs it "
+             "with the pinned packages); or choose backend=local")
+REPO_ROOT = str(Path(__file__).resolve().parents[2])
+
+
+def check_backend(backend: str, what: str = "backend") -> str:
+    if backend not in BACKENDS:
+        raise ValueError(f"{what}={backend!r}: choose one of {list(BACKENDS)} (local: processes on this machine; "
+                         "ray: actors on a Ray cluster, ray.address=auto or host:port joins one)")
+    return backend
+
+
+def import_ray():
+    """``ray``, or an ImportError that names the extra to install."""
+    try:
+        import ray
+    except ImportError as error:
+        raise ImportError(RAY_EXTRA) from error
+    return ray
+
+
+@contextlib.contextmanager
+def ray_session(address: str | None = None, num_cpus: int | None = None):
+    """Ray for the block: joins the cluster at ``address`` (``auto``: the one ``ray start`` made on this
+    machine; ``host:port``), or starts a local one with ``num_cpus`` when None; shuts down only what it
+    started. Workers import this checkout (``PYTHONPATH``), whichever copy the nodes have installed."""
+    ray = import_ray()
+    if ray.is_initialized():
+        yield ray
+        return
+    path = os.pathsep.join(p for p in (REPO_ROOT, os.environ.get("PYTHONPATH", "")) if p)
+    options = dict(include_dashboard=False, log_to_driver=False, configure_logging=False,
+                   runtime_env={"env_vars": {"PYTHONPATH": path, "OMP_NUM_THREADS": "1"}})
+    try:
+        if address:
+            ray.init(address=address, **options)
+        else:
+            ray.init(num_cpus=num_cpus, **options)
+    except ConnectionError as error:
+        raise ConnectionError(f"no Ray cluster at ray.address={address!r}: start one (ray start --head) or leave "
+                              "ray.address unset for a local Ray") from error
+    try:
+        yield ray
+    finally:
+        ray.shutdown()
+
+
+def _died(ray) -> tuple[type, ...]:
+    """The errors that mean a task's actor (or its node) is gone, not that the task failed."""
+    names = ("RayActorError", "WorkerCrashedError", "NodeDiedError", "ActorDiedError")
+    return tuple(getattr(ray.exceptions, n) for n in names if hasattr(ray.exceptions, n))
+
+
+class _Worker:
+    def __init__(self, initializer: Callable | None, initargs: tuple):
+        if initializer is not None:
+            initializer(*initargs)
+
+    def run(self, fn: Callable, task):
+        return fn(task)
+
+    def pid(self) -> int:
+        return os.getpid()
+
+
+class RayPool:
+    """``workers`` Ray actors (``cpus_per_worker`` CPUs each) with ``imap_unordered``; see the module docstring."""
+
+    def __init__(self, workers: int, initializer: Callable | None = None, initargs: tuple = (), *,
+                 cpus_per_worker: float = 1.0, max_replacements: int | None = None):
+        ray = import_ray()
+        if not ray.is_initialized():
+            raise RuntimeError("RayPool needs Ray up: use it inside `with ray_session(...)`")
+        if workers < 1:
+            raise ValueError(f"workers={workers}: need at least one Ray actor")
+        self._ray = ray
+        self._cls = ray.remote(num_cpus=cpus_per_worker, max_restarts=0)(_Worker)
+        self._init = (initializer, initargs)
+        self.replacements_left = workers if max_replacements is None else int(max_replacements)
+        self.actors = [self._spawn() for _ in range(workers)]
+        self.deaths = 0
+
+    def _spawn(self):
+        return self._cls.remote(*self._init)
+
+    def pids(self) -> list[int]:
+        """The actors' process ids (``ray.get`` waits for them to be built)."""
+        return self._ray.get([a.pid.remote() for a in self.actors])
+
+    def imap_unordered(self, fn: Callable, tasks: Iterable, chunksize: int = 1) -> Iterator:
+        ray = self._ray
+        queue = deque(tasks)
+        in_flight: dict = {}                        # object ref -> (actor, task)
+        idle = list(self.actors)
+        while queue or in_flight:
+            while queue and idle:
+                actor = idle.pop()
+                task = queue.popleft()
+                in_flight[actor.run.remote(fn, task)] = (actor, task)
+            ready, _ = ray.wait(list(in_flight), num_returns=1)
+            actor, task = in_flight.pop(ready[0])
+            try:
+                result = ray.get(ready[0])
+            except _died(ray) as error:
+                self.deaths += 1
+                queue.appendleft(task)               # run again elsewhere: its result was never delivered
+                self.actors.remove(actor)
+                if self.replacements_left > 0:
+                    self.replacements_left -= 1
+                    replacement = self._spawn()
+                    self.actors.append(replacement)
+                    idle.append(replacement)
+                if not self.actors:
+                    raise RuntimeError(f"every Ray worker died ({self.deaths}); the last error: {error}") from error
+                continue
+            idle.append(actor)
+            yield result
+
+    def terminate(self) -> None:
+        for actor in self.actors:
+            with contextlib.suppress(Exception):
+                self._ray.kill(actor)
+        self.actors = []
+
+    def join(self) -> None:
+        pass
