@@ -6,9 +6,10 @@
     python recipes/train_dqn.py profile=paper         # the paper's network and settings (ResNet-101, replay 4000)
     python recipes/train_dqn.py out_dir=runs/x resume=true   # continue a killed run from its last checkpoint
     python recipes/train_dqn.py profile=dqfd init_from=runs/student/dqn out_dir=runs/y   # a new phase from a checkpoint
+    python recipes/train_dqn.py collector=ray collector.num_workers=8 ray.address=auto    # env actors on a Ray cluster
 
 Config groups (recipes/conf/): reward, trunk, collector, buffer, optim, loss, logger, checkpoint, eval,
-profile. The loop follows TorchRL's sota DQN recipe: collect → extend replay → update → log →
+ray, profile. The loop follows TorchRL's sota DQN recipe: collect → extend replay → update → log →
 sync weights; greedy evaluation on the test split and checkpoints every so many frames.
 """
 
@@ -32,7 +33,7 @@ from tqdm import tqdm
 
 from mqa_rl import keys
 from mqa_rl.collectors.demonstrations import load_demonstrations
-from mqa_rl.collectors.factory import make_collector, running
+from mqa_rl.collectors.factory import make_collector, running, share_train_steps
 from mqa_rl.collectors.replay import annealed_is_beta, compact_transitions, make_replay_buffer
 from mqa_rl.envs.qmap_overlay import qmap_episode_frames, qmap_image
 from mqa_rl.envs.video import write_video
@@ -312,7 +313,7 @@ def _train(cfg: DictConfig, out: Path, created: bool) -> dict:
     remaining = total - state["frames"]
     if remaining > 0:
         collector = make_collector(col, acting, {**env_kwargs, "counter": counter}, total_frames=remaining,
-                                   seed=cfg.seed + state["frames"])
+                                   seed=cfg.seed + state["frames"], ray_address=cfg.ray.address)
         if cfg.threads:
             torch.set_num_threads(cfg.threads)
         bar = tqdm(total=total, initial=state["frames"], unit="frame", dynamic_ncols=True, disable=not cfg.logger.progress)
@@ -327,6 +328,7 @@ def _train(cfg: DictConfig, out: Path, created: bool) -> dict:
                 rb.extend(compact_transitions(data))
                 state["frames"] += n
                 counter.fill_(state["frames"])
+                share_train_steps(collector, state["frames"])
                 egreedy.step(n)
                 metrics = {"train/epsilon": float(egreedy.eps), "train/beta": float(data["next", *keys.BETA].mean()),
                            "time/env_steps_per_s": n / max(t_collect, 1e-9)}

@@ -3,11 +3,14 @@
     kind: single        Collector in this process (the env steps between updates)
     kind: multi_sync    MultiSyncCollector, ``num_workers`` processes, one batch from all of them
     kind: multi_async   MultiAsyncCollector, workers keep collecting while the learner updates
+    kind: ray           TorchRL's RayCollector: ``num_workers`` actors of one CPU on the Ray cluster at
+                        ``ray_address`` (or a local Ray), one batch from all of them, weights pushed after
+                        every batch as the local kinds do
 
 The env factory is ``mqa_rl.transforms.mqa_env.make_mqa_env`` (module level, so spawned workers can
 import it). The β step counter is a shared-memory tensor handed to every worker through
-``create_env_kwargs`` (a closure would give each worker a frozen copy). A ``ray`` kind
-(``torchrl.collectors.distributed.RayCollector``) can be added here without touching the recipe.
+``create_env_kwargs`` (a closure would give each worker a frozen copy). Ray copies every argument, so on
+Ray the counter is set in each actor's env after every batch instead (``share_train_steps``).
 
 Use ``running(collector)`` around the loop: it shuts the workers down on any exit, including an
 exception or Ctrl-C, so no worker process outlives the run.
@@ -21,13 +24,16 @@ from collections.abc import Mapping
 import torch
 from torchrl.collectors import BaseCollector, Collector, MultiAsyncCollector, MultiSyncCollector
 
+from mqa_rl.collectors.ray_pool import import_ray, ray_init_options
+from mqa_rl.transforms.beta import BetaSchedule
+from mqa_rl.transforms.factory import make_reward_transform
 from mqa_rl.transforms.mqa_env import make_mqa_env
 
-KINDS = ("single", "multi_sync", "multi_async")
+KINDS = ("single", "multi_sync", "multi_async", "ray")
 
 
 def make_collector(cfg: Mapping, policy, env_kwargs: Mapping, *, total_frames: int, init_random_frames: int = 0,
-                   seed: int | None = None) -> BaseCollector:
+                   seed: int | None = None, ray_address: str | None = None) -> BaseCollector:
     """A collector of ``policy`` on ``make_mqa_env(**env_kwargs)``; ``env_kwargs`` may hold the shared counter."""
     kind = cfg.get("kind", "single")
     workers = int(cfg.get("num_workers", 1))
@@ -43,6 +49,21 @@ def make_collector(cfg: Mapping, policy, env_kwargs: Mapping, *, total_frames: i
                   device="cpu", storing_device="cpu", auto_register_policy_transforms=False)
     if kind == "single":
         coll = Collector(make_mqa_env, policy, create_env_kwargs=dict(env_kwargs), **common)
+    elif kind == "ray":
+        import_ray()
+        from torchrl.collectors.distributed import RayCollector
+
+        # a fresh dict per call: RayCollector adds its own keys to the one it is given
+        inner = dict(create_env_kwargs={k: v for k, v in env_kwargs.items() if k != "counter"},
+                     auto_register_policy_transforms=False, init_random_frames=init_random_frames)
+        coll = RayCollector(make_mqa_env, policy, frames_per_batch=frames_per_batch, total_frames=total_frames,
+                            num_collectors=workers, sync=True, collector_kwargs=inner, device="cpu", storing_device="cpu",
+                            ray_init_config=ray_init_options(ray_address, workers),
+                            remote_configs={"num_cpus": 1, "memory": 3 * 1024 ** 3})
+        coll.update_policy_weights_(policy)      # the first push: lazily sets up the weight-sync group
+        if env_kwargs.get("reward") is not None:
+            stack = make_reward_transform(env_kwargs["reward"], push_length=1.0)
+            coll._mqa_beta_index = next((i for i, t in enumerate(stack) if isinstance(t, BetaSchedule)), None)
     else:
         cls = MultiSyncCollector if kind == "multi_sync" else MultiAsyncCollector
         coll = cls([make_mqa_env] * workers, policy, create_env_kwargs=[dict(env_kwargs)] * workers,
@@ -50,6 +71,15 @@ def make_collector(cfg: Mapping, policy, env_kwargs: Mapping, *, total_frames: i
     if seed is not None:
         coll.set_seed(seed)
     return coll
+
+
+def share_train_steps(collector: BaseCollector, steps: int) -> None:
+    """Tell the collector's envs how many training steps were taken (β's S_n). The local kinds share the
+    counter's memory already; Ray's actors hold copies, so each actor's ``BetaSchedule`` is set here (its
+    place in the env's transforms is the one ``make_reward_transform`` gives it: the stack comes first)."""
+    beta = getattr(collector, "_mqa_beta_index", None)
+    if beta is not None:
+        collector.map_fn(f"env.transform[{beta}].set_train_steps", [(int(steps),)] * collector.num_collectors)
 
 
 @contextlib.contextmanager

@@ -46,23 +46,25 @@ def import_ray():
     return ray
 
 
+def ray_init_options(address: str | None = None, num_cpus: int | None = None) -> dict:
+    """``ray.init`` keywords: join the cluster at ``address`` (``auto``: the one ``ray start`` made on this
+    machine; ``host:port``), or start a local Ray with ``num_cpus`` when None. Workers import this checkout
+    (``PYTHONPATH``) with one OpenMP thread each (one CPU per actor)."""
+    path = os.pathsep.join(p for p in (REPO_ROOT, os.environ.get("PYTHONPATH", "")) if p)
+    options = dict(include_dashboard=False, log_to_driver=False, configure_logging=False,
+                   runtime_env={"env_vars": {"PYTHONPATH": path, "OMP_NUM_THREADS": "1"}})
+    return {**options, "address": address} if address else {**options, "num_cpus": num_cpus}
+
+
 @contextlib.contextmanager
 def ray_session(address: str | None = None, num_cpus: int | None = None):
-    """Ray for the block: joins the cluster at ``address`` (``auto``: the one ``ray start`` made on this
-    machine; ``host:port``), or starts a local one with ``num_cpus`` when None; shuts down only what it
-    started. Workers import this checkout (``PYTHONPATH``), whichever copy the nodes have installed."""
+    """Ray for the block (``ray_init_options``); shuts down only what it started."""
     ray = import_ray()
     if ray.is_initialized():
         yield ray
         return
-    path = os.pathsep.join(p for p in (REPO_ROOT, os.environ.get("PYTHONPATH", "")) if p)
-    options = dict(include_dashboard=False, log_to_driver=False, configure_logging=False,
-                   runtime_env={"env_vars": {"PYTHONPATH": path, "OMP_NUM_THREADS": "1"}})
     try:
-        if address:
-            ray.init(address=address, **options)
-        else:
-            ray.init(num_cpus=num_cpus, **options)
+        ray.init(**ray_init_options(address, num_cpus))
     except ConnectionError as error:
         raise ConnectionError(f"no Ray cluster at ray.address={address!r}: start one (ray start --head) or leave "
                               "ray.address unset for a local Ray") from error
