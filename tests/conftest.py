@@ -6,6 +6,8 @@ from pathlib import Path
 
 import pytest
 
+from ray_cluster import ray_cluster  # noqa: F401  (the ray lane's two-node cluster fixture)
+
 REPO = Path(__file__).resolve().parents[1]      # the checkout the tests run in
 
 SMALL = {"easy": 2, "medium": 1, "hard": 2}

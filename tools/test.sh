@@ -7,12 +7,14 @@
 #   bash tools/test.sh fast     unit + integration, not slow (the lane to run while working: <= 8 min)
 #   bash tools/test.sh e2e      tests/e2e, not slow
 #   bash tools/test.sh slow     the slow tests of every layer
+#   bash tools/test.sh ray      tests/ray: the Ray backends on a real two-node cluster on this machine's loopback
+#                               (ray start --head + a second ray start, one CPU each, stopped at the end)
 # Extra arguments go to pytest, e.g. `bash tools/test.sh fast tests/integration/test_env.py -x`.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 lane=all
 case "${1:-}" in
-    all|fast|e2e|slow) lane=$1; shift ;;
+    all|fast|e2e|slow|ray) lane=$1; shift ;;
     --all) shift ;;                       # the old spelling of `all`
 esac
 . tools/bootstrap.sh
@@ -20,7 +22,8 @@ case $lane in
     fast) args=(-m "not slow" tests/unit tests/integration) ;;
     e2e)  bash tools/browser.sh; args=(-m "not slow" tests/e2e) ;;
     slow) args=(-m slow tests) ;;
-    all)  bash tools/browser.sh; args=(tests/unit tests/integration tests/e2e) ;;
+    ray)  args=(-m "not slow" tests/ray) ;;
+    all)  bash tools/browser.sh; args=(tests/unit tests/integration tests/e2e tests/ray) ;;
 esac
 # paths given after the lane replace the lane's folders (the marker stays)
 for a in "$@"; do

@@ -66,8 +66,9 @@ def ray_session(address: str | None = None, num_cpus: int | None = None):
     try:
         ray.init(**ray_init_options(address, num_cpus))
     except ConnectionError as error:
-        raise ConnectionError(f"no Ray cluster at ray.address={address!r}: start one (ray start --head) or leave "
-                              "ray.address unset for a local Ray") from error
+        raise ConnectionError(f"no Ray cluster at ray.address={address!r}, or it refused this driver: start one "
+                              "(ray start --head), or leave ray.address unset for a local Ray; a cluster with token "
+                              "authentication needs RAY_AUTH_MODE=token here and its ~/.ray/auth_token") from error
     try:
         yield ray
     finally:
