@@ -20,6 +20,10 @@ from __future__ import annotations
 
 import contextlib
 import os
+import socket
+import subprocess
+import sys
+import time
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
@@ -63,12 +67,14 @@ def ray_session(address: str | None = None, num_cpus: int | None = None):
     if ray.is_initialized():
         yield ray
         return
+    hint = ("start one (ray start --head), or leave ray.address unset for a local Ray; a cluster with token "
+            "authentication needs RAY_AUTH_MODE=token here and its ~/.ray/auth_token")
+    if address and address != "auto" and not _listening(address):     # Ray itself retries for minutes
+        raise ConnectionError(f"nothing listens at ray.address={address!r}: {hint}")
     try:
         ray.init(**ray_init_options(address, num_cpus))
     except ConnectionError as error:
-        raise ConnectionError(f"no Ray cluster at ray.address={address!r}, or it refused this driver: start one "
-                              "(ray start --head), or leave ray.address unset for a local Ray; a cluster with token "
-                              "authentication needs RAY_AUTH_MODE=token here and its ~/.ray/auth_token") from error
+        raise ConnectionError(f"no Ray cluster at ray.address={address!r}, or it refused this driver: {hint}") from error
     try:
         yield ray
     finally:
@@ -91,6 +97,53 @@ class _Worker:
 
     def pid(self) -> int:
         return os.getpid()
+
+
+def _listening(address: str, timeout: float = 5.0) -> bool:
+    host, _, port = address.rpartition(":")
+    try:
+        with socket.create_connection((host, int(port)), timeout=timeout):
+            return True
+    except (OSError, ValueError):
+        return False
+
+
+# Ray 2.60 authenticates with a token (~/.ray/auth_token, made by the first head): the nodes and the driver must
+# agree on the mode, which Ray reads once, when first imported (torchrl imports it): set it before that.
+LOOPBACK_ENV = {"RAY_AUTH_MODE": "token", "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER": "1"}   # 2nd: two nodes, one machine
+
+
+@contextlib.contextmanager
+def loopback_cluster(nodes: int = 2, cpus_per_node: int = 1):
+    """A real ``nodes``-node Ray cluster on this machine's loopback for the block (tests, benchmarks): a head
+    and ``nodes - 1`` more ``ray start`` nodes of ``cpus_per_node`` CPUs, as on a real cluster; yields its
+    address (host:port) and ends with ``ray stop --force`` (every Ray process of this user here)."""
+    os.environ.update(LOOPBACK_ENV)
+    ray_cli = str(Path(sys.executable).with_name("ray"))
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    address = f"127.0.0.1:{port}"
+    common = ("--node-ip-address=127.0.0.1", f"--num-cpus={cpus_per_node}", "--disable-usage-stats")
+
+    def start(*args):
+        subprocess.run([ray_cli, "start", *args, *common], env=dict(os.environ), check=True, timeout=120,
+                       stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        start("--head", f"--port={port}", "--include-dashboard=false")
+        for _ in range(nodes - 1):
+            start(f"--address={address}")
+        with ray_session(address) as ray:             # wait until every node has joined
+            deadline = time.time() + 60
+            while sum(n["Alive"] for n in ray.nodes()) < nodes and time.time() < deadline:
+                time.sleep(0.5)
+            if ray.cluster_resources().get("CPU") != nodes * cpus_per_node:
+                raise RuntimeError(f"the loopback cluster has {ray.cluster_resources()} after 60 s, "
+                                   f"not {nodes} nodes of {cpus_per_node} CPU")
+        yield address
+    finally:
+        subprocess.run([ray_cli, "stop", "--force"], env=dict(os.environ), timeout=120,
+                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
 
 class RayPool:
