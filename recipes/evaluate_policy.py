@@ -12,7 +12,8 @@ episode reward, pushes, fraction of episodes ending in a simple scene, change of
 hidden fraction χ from the first to the last image, fraction of targets fully hidden at the end, the net
 number of targets made countable (``countable_gain``: made countable − buried, per episode) and whether a
 perfect counter reads the COUNTING answer from I_stop (``counter_stop``) or from either frame
-(``counter_either``) — each with a 95 % interval; and greedy − each other policy (random, no_manipulation, ...)
+(``counter_either``) — each with a 95 % interval over episodes (``ci95``) and one that resamples whole scenes
+(``scene_low`` / ``scene_high``, shown in results.md); and greedy − each other policy (random, no_manipulation, ...)
 paired by question. Writes
 ``results.json``, ``results.md``, the per-episode metrics (``episodes/<policy>_<level>.pt``) and
 videos (Q maps beside the frames) to ``out_dir``. ``baseline_from=<an earlier out_dir>`` reuses that
@@ -33,7 +34,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from mqa_rl.collectors.ray_pool import check_backend
 from mqa_rl.envs.video import write_video
-from mqa_rl.evaluation.episode_metrics import mean_ci95
+from mqa_rl.evaluation.episode_metrics import mean_ci95, scene_bootstrap_ci95
 from mqa_rl.evaluation.policy_units import POLICIES, close_envs, run_units
 from mqa_rl.files import load_tensors, write_atomic
 from mqa_rl.modules.trained_policy import read_run_config
@@ -52,9 +53,23 @@ def episodes_meta(cfg: DictConfig, dataset, level: str, qtypes, max_pushes: int,
 
 
 def shown(stat: dict, sep: str = " ± ") -> str:
-    """A mean with its 95 % half-width; the mean alone where there is no interval (one episode: n = 1)."""
+    """A mean with its 95 % interval by scene where the episodes name their scenes ([low, high]), else its
+    half-width over episodes; the mean alone where there is no interval (one episode: n = 1)."""
+    if stat.get("scene_low") is not None and stat["scene_low"] == stat["scene_low"]:
+        return f"{stat['mean']:+.3f} [{stat['scene_low']:+.3f}, {stat['scene_high']:+.3f}]"
     ci = stat["ci95"]
     return f"{stat['mean']:+.3f}" if ci != ci else f"{stat['mean']:+.3f}{sep}{ci:.3f}"
+
+
+def statistics(values: torch.Tensor, scenes: torch.Tensor | None) -> dict:
+    """Mean, 95 % half-width and n over episodes; with the episodes' scenes also the 95 % interval that
+    resamples whole scenes (a pile's questions share its occlusions: they are not independent)."""
+    out = dict(zip(("mean", "ci95", "n"), mean_ci95(values)))
+    ok = torch.isfinite(values)
+    if scenes is not None and ok.sum() > 0:
+        _, low, high, n_scenes = scene_bootstrap_ci95(values[ok], scenes[ok])
+        out.update(scene_low=low, scene_high=high, scenes=n_scenes)
+    return out
 
 
 def reuse_baseline(folder, name: str, meta: dict) -> dict[str, torch.Tensor] | None:
@@ -123,13 +138,12 @@ def main(cfg: DictConfig) -> None:
     for level in cfg.difficulties:
         per_policy = {name: metrics[level, name] for name in cfg.policies}
         for name, m in per_policy.items():
-            results.setdefault(level, {})[name] = {k: dict(zip(("mean", "ci95", "n"), mean_ci95(m.get(k, nan))))
-                                                   for k in REPORTED}
+            results.setdefault(level, {})[name] = {k: statistics(m.get(k, nan), m.get("scene")) for k in REPORTED}
             print(f"{level:>6} {name:>13}: " + ", ".join(f"{k} {shown(results[level][name][k], sep='±')}" for k in REPORTED),
                   flush=True)
         if "greedy" in per_policy:
-            for base in (p for p in per_policy if p != "greedy"):
-                diff = {k: dict(zip(("mean", "ci95", "n"), mean_ci95(per_policy["greedy"][k] - per_policy[base].get(k, nan))))
+            for base in (p for p in per_policy if p != "greedy"):     # paired by question: the same episodes' scenes
+                diff = {k: statistics(per_policy["greedy"][k] - per_policy[base].get(k, nan), per_policy["greedy"].get("scene"))
                         for k in REPORTED}
                 results[level][f"greedy-{base}"] = diff
     for level, rows in results.items():

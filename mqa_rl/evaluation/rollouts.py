@@ -13,12 +13,14 @@ from mqa_rl.evaluation.episode_metrics import FINAL_KEYS, episode_metrics
 
 def run_episodes(env, policy, episodes: int, *, max_pushes: int, simple_threshold: float = 0.2,
                  on_episode: Callable[[int, TensorDictBase], None] | None = None) -> dict[str, torch.Tensor]:
-    """``episodes`` rollouts (each to its end) under the policy's deterministic mode; metrics [episodes].
+    """``episodes`` rollouts (each to its end) under the policy's deterministic mode; metrics [episodes],
+    with ``scene``: each episode's pile (its index in the dataset's scenes), for intervals by scene.
 
     ``on_episode(i, rollout)`` sees each rollout (e.g. to write a video). Seed the env beforehand for
     the same questions every time.
     """
-    finals = []
+    finals, scenes = [], []
+    scene_index = {s.id: i for i, s in enumerate(env.base_env.dataset.scenes)}
     with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
         for i in range(episodes):
             rollout = env.rollout(max_pushes + 1, policy, break_when_any_done=True)
@@ -26,6 +28,7 @@ def run_episodes(env, policy, episodes: int, *, max_pushes: int, simple_threshol
                 raise RuntimeError(f"episode {i} did not end within {max_pushes + 1} steps: is the env's "
                                    f"max_pushes larger than {max_pushes}?")
             finals.append(rollout["next"][-1].select(*FINAL_KEYS, strict=False))
+            scenes.append(scene_index[env.base_env.question.scene_id])
             if on_episode is not None:
                 on_episode(i, rollout)
-    return episode_metrics(torch.stack(finals), simple_threshold)
+    return {**episode_metrics(torch.stack(finals), simple_threshold), "scene": torch.tensor(scenes, dtype=torch.int64)}
