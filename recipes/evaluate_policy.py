@@ -12,7 +12,7 @@ episode reward, pushes, fraction of episodes ending in a simple scene, change of
 hidden fraction χ from the first to the last image, fraction of targets fully hidden at the end, the net
 number of targets made countable (``countable_gain``: made countable − buried, per episode) and whether a
 perfect counter reads the COUNTING answer from I_stop (``counter_stop``) or from either frame
-(``counter_either``) — each with a 95 % interval over episodes (``ci95``) and one that resamples whole scenes
+(``counter_either``), the pushes that moved no object by 5 mm (``idle_pushes``) — each with a 95 % interval over episodes (``ci95``) and one that resamples whole scenes
 (``scene_low`` / ``scene_high``, shown in results.md); and greedy − each other policy (random, no_manipulation, ...)
 paired by question. Writes
 ``results.json``, ``results.md``, the per-episode metrics (``episodes/<policy>_<level>.pt``) and
@@ -41,7 +41,7 @@ from mqa_rl.modules.trained_policy import read_run_config
 from mqa_rl.transforms.push_memory import memory_radius
 
 REPORTED = ("reward", "pushes", "final_simple", "chi_end", "chi_change", "hidden_end", "into_view", "out_of_view",
-            "countable_gain", "counter_stop", "counter_either", "stopped")
+            "countable_gain", "counter_stop", "counter_either", "idle_pushes", "stopped")
 
 
 def episodes_meta(cfg: DictConfig, dataset, level: str, qtypes, max_pushes: int, reward: dict,

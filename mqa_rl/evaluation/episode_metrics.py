@@ -76,6 +76,18 @@ def episode_metrics(final: TensorDictBase, simple_threshold: float = 0.2) -> dic
     return out
 
 
+IDLE_MOVE_M = 0.005          # a push that moves no object by this much (5 mm) moved nothing
+
+
+def idle_pushes(rollout: TensorDictBase, min_move: float = IDLE_MOVE_M) -> torch.Tensor:
+    """[] pushes of one episode's rollout [T] that moved no object by ``min_move`` metres (wasted: the scene, and
+    so the answer, is what it was); the stop is not a push."""
+    before, after = rollout.get(keys.OBJECT_POS), rollout.get(("next", *keys.OBJECT_POS))
+    moved = (after - before).norm(dim=-1).amax(-1)                         # [T] the largest object displacement
+    pushed = ~rollout.get(("next", *keys.IS_STOP)).reshape(-1)
+    return ((moved < min_move) & pushed).sum().to(torch.float32)
+
+
 def mean_ci95(values: torch.Tensor) -> tuple[float, float, int]:
     """(mean, half-width of the 95 % interval, n) over the finite values; normal approximation
     (1.96 · sample std / √n), which suits the ≥ 100 episodes of an evaluation. NaN when n < 2."""

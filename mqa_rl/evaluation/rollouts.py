@@ -8,18 +8,19 @@ import torch
 from tensordict import TensorDictBase
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
-from mqa_rl.evaluation.episode_metrics import FINAL_KEYS, episode_metrics
+from mqa_rl.evaluation.episode_metrics import FINAL_KEYS, episode_metrics, idle_pushes
 
 
 def run_episodes(env, policy, episodes: int, *, max_pushes: int, simple_threshold: float = 0.2,
                  on_episode: Callable[[int, TensorDictBase], None] | None = None) -> dict[str, torch.Tensor]:
     """``episodes`` rollouts (each to its end) under the policy's deterministic mode; metrics [episodes],
-    with ``scene``: each episode's pile (its index in the dataset's scenes), for intervals by scene.
+    with ``scene``: each episode's pile (its index in the dataset's scenes), for intervals by scene, and
+    ``idle_pushes``: its pushes that moved nothing.
 
     ``on_episode(i, rollout)`` sees each rollout (e.g. to write a video). Seed the env beforehand for
     the same questions every time.
     """
-    finals, scenes = [], []
+    finals, scenes, idle = [], [], []
     scene_index = {s.id: i for i, s in enumerate(env.base_env.dataset.scenes)}
     with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
         for i in range(episodes):
@@ -29,6 +30,8 @@ def run_episodes(env, policy, episodes: int, *, max_pushes: int, simple_threshol
                                    f"max_pushes larger than {max_pushes}?")
             finals.append(rollout["next"][-1].select(*FINAL_KEYS, strict=False))
             scenes.append(scene_index[env.base_env.question.scene_id])
+            idle.append(idle_pushes(rollout))
             if on_episode is not None:
                 on_episode(i, rollout)
-    return {**episode_metrics(torch.stack(finals), simple_threshold), "scene": torch.tensor(scenes, dtype=torch.int64)}
+    return {**episode_metrics(torch.stack(finals), simple_threshold), "scene": torch.tensor(scenes, dtype=torch.int64),
+            "idle_pushes": torch.stack(idle)}
