@@ -46,7 +46,8 @@ for k in 0 1; do
   if [ -f "$demos" ]; then
     have=$(python -c "
 import json, sys; o = json.load(open(sys.argv[1]))['oracle']
-print(o['refine_radius'], float(o['min_visible_fraction']), str(o.get('require_gain', False)).lower(), o['geometry'], o['order'])" "$demos")
+print(o.get('refine_radius', 0), float(o.get('min_visible_fraction', 0.3)), str(o.get('require_gain', False)).lower(),
+      o.get('geometry', 'visible'), o.get('order', 'visible_first'))" "$demos")
     if [ "$have" != "$WANT" ]; then
       echo "$ROOT/demos_$k holds demonstrations of another teacher (oracle refine_radius, min_visible_fraction," \
            "require_gain, geometry, order = $have), not the $TEACHER teacher's ($WANT):" \

@@ -65,7 +65,7 @@ def run_quick_chain(root, **env):
 
 def test_the_quick_chain_names_its_teachers_and_refuses_others(tmp_path):
     done = run_quick_chain(tmp_path / "run", MQA_TEACHER="bogus")
-    assert done.returncode == 2 and "MQA_TEACHER must be 'image' or 'refined'" in done.stderr
+    assert done.returncode == 2 and "MQA_TEACHER must be 'image', 'refined' or 'countable'" in done.stderr
     assert not (tmp_path / "run").exists()                 # refused before anything is written
 
 
@@ -75,5 +75,7 @@ def test_the_quick_chain_refuses_to_reuse_the_other_teachers_demonstrations(tmp_
     (demos / "demos.json").write_text(json.dumps({"states": 600, "oracle": {"refine_radius": 1}}))   # refined teacher's
     done = run_quick_chain(tmp_path / "run")
     assert done.returncode == 2, done.stderr[-2000:]
-    assert "demos_0 holds demonstrations with oracle.refine_radius=1, not the image teacher's (0)" in done.stderr
+    assert ("demos_0 holds demonstrations of another teacher (oracle refine_radius, min_visible_fraction, require_gain, "
+            "geometry, order = 1 0.3 false visible visible_first), not the image teacher's "
+            "(0 0.3 false visible visible_first)") in done.stderr
     assert sorted(p.name for p in (tmp_path / "run").iterdir()) == ["demos_0"]      # nothing else started
