@@ -126,10 +126,15 @@ def loopback_cluster(nodes: int = 2, cpus_per_node: int = 1):
     address = f"127.0.0.1:{port}"
     common = ("--node-ip-address=127.0.0.1", f"--num-cpus={cpus_per_node}", "--disable-usage-stats")
 
+    def ray_cli_run(*args):
+        done = subprocess.run([ray_cli, *args], env=dict(os.environ), timeout=120, capture_output=True, text=True)
+        if done.returncode:
+            raise RuntimeError(f"`ray {' '.join(args)}` failed: {done.stderr[-1500:]}")
+
     def start(*args):
-        subprocess.run([ray_cli, "start", *args, *common], env=dict(os.environ), check=True, timeout=120,
-                       stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        ray_cli_run("start", *args, *common)
     try:
+        ray_cli_run("get-auth-token", "--generate")       # a fresh machine has no token yet
         start("--head", f"--port={port}", "--include-dashboard=false")
         for _ in range(nodes - 1):
             start(f"--address={address}")
