@@ -117,7 +117,7 @@ LOOPBACK_ENV = {"RAY_AUTH_MODE": "token", "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER": "
 def loopback_cluster(nodes: int = 2, cpus_per_node: int = 1):
     """A real ``nodes``-node Ray cluster on this machine's loopback for the block (tests, benchmarks): a head
     and ``nodes - 1`` more ``ray start`` nodes of ``cpus_per_node`` CPUs, as on a real cluster; yields its
-    address (host:port) and ends with ``ray stop --force`` (every Ray process of this user here)."""
+    address (host:port); at the end its processes are stopped (those of this cluster only)."""
     os.environ.update(LOOPBACK_ENV)
     ray_cli = str(Path(sys.executable).with_name("ray"))
     with socket.socket() as s:
@@ -125,6 +125,7 @@ def loopback_cluster(nodes: int = 2, cpus_per_node: int = 1):
         port = s.getsockname()[1]
     address = f"127.0.0.1:{port}"
     common = ("--node-ip-address=127.0.0.1", f"--num-cpus={cpus_per_node}", "--disable-usage-stats")
+    session = None
 
     def ray_cli_run(*args):
         done = subprocess.run([ray_cli, *args], env=dict(os.environ), timeout=120, capture_output=True, text=True)
@@ -139,6 +140,7 @@ def loopback_cluster(nodes: int = 2, cpus_per_node: int = 1):
         for _ in range(nodes - 1):
             start(f"--address={address}")
         with ray_session(address) as ray:             # wait until every node has joined
+            session = ray._private.worker.global_worker.node.get_session_dir_path()
             deadline = time.time() + 60
             while sum(n["Alive"] for n in ray.nodes()) < nodes and time.time() < deadline:
                 time.sleep(0.5)
@@ -147,8 +149,28 @@ def loopback_cluster(nodes: int = 2, cpus_per_node: int = 1):
                                    f"not {nodes} nodes of {cpus_per_node} CPU")
         yield address
     finally:
-        subprocess.run([ray_cli, "stop", "--force"], env=dict(os.environ), timeout=120,
-                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        _stop_session(session)
+
+
+def _stop_session(session: str | None) -> None:
+    """End the processes of one Ray session (its daemons name the session's folder; its workers end with their
+    raylet), not every Ray of this machine as ``ray stop`` would: another run's local Ray keeps going."""
+    if session is None:
+        return
+    pids = []
+    for proc in Path("/proc").iterdir():
+        try:
+            if proc.name.isdigit() and session in (proc / "cmdline").read_bytes().decode(errors="ignore"):
+                pids.append(int(proc.name))
+        except OSError:
+            continue
+    for sig in (15, 9):
+        for pid in pids:
+            with contextlib.suppress(OSError):
+                os.kill(pid, sig)
+        deadline = time.time() + 10
+        while sig == 15 and time.time() < deadline and any(Path(f"/proc/{p}").exists() for p in pids):
+            time.sleep(0.2)
 
 
 class RayPool:
