@@ -23,6 +23,7 @@ import os
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
@@ -57,7 +58,8 @@ def ray_init_options(address: str | None = None, num_cpus: int | None = None) ->
     path = os.pathsep.join(p for p in (REPO_ROOT, os.environ.get("PYTHONPATH", "")) if p)
     options = dict(include_dashboard=False, log_to_driver=False, configure_logging=False,
                    runtime_env={"env_vars": {"PYTHONPATH": path, "OMP_NUM_THREADS": "1"}})
-    return {**options, "address": address} if address else {**options, "num_cpus": num_cpus}
+    # "local": a new Ray for this run, even where `ray start` left a cluster on this machine
+    return {**options, "address": address} if address else {**options, "address": "local", "num_cpus": num_cpus}
 
 
 @contextlib.contextmanager
@@ -150,6 +152,10 @@ def loopback_cluster(nodes: int = 2, cpus_per_node: int = 1):
         yield address
     finally:
         _stop_session(session)
+        current = Path(tempfile.gettempdir()) / "ray" / "ray_current_cluster"     # `ray start` notes its head here
+        with contextlib.suppress(OSError):
+            if current.read_text().strip().endswith(f":{port}"):
+                current.unlink()
 
 
 def _stop_session(session: str | None) -> None:
