@@ -159,3 +159,9 @@ def test_the_shipped_critic_loads_and_names_its_policy():
     critic, meta = StopCritic.load(ROOT / "checkpoints" / "stop_geometric_student")
     assert meta["run"] == "checkpoints/dqn_geometric_student" and len(meta["policy_fingerprint"]) == 64
     assert critic(torch.zeros(3, len(FEATURES))).shape == (3,)
+
+
+def test_the_shipped_countable_critic_minimises_what_the_counter_misses():
+    critic, meta = StopCritic.load(ROOT / "checkpoints" / "stop_countable")
+    assert meta["value"] == "uncountable" and meta["run"] == "runs/countable_rl/countable/dqn"
+    assert critic(torch.zeros(2, len(FEATURES))).shape == (2,)
