@@ -8,8 +8,8 @@
 
 Each actor runs ``initializer(*initargs)`` once (it builds its env and policy) and then ``fn(task)`` for
 the tasks it is handed, one at a time, in a process whose module globals hold what the initializer built,
-as a pool worker's do. The driver keeps one task in flight per actor and hands the next one to whichever
-actor finishes first, so a slow node takes fewer. A task whose actor dies (its process killed, its node
+as a pool worker's do. The driver keeps two tasks in flight per actor (one running, one queued, so an actor
+never waits for the driver) and hands the next one to whichever actor finishes first, so a slow node takes fewer. A task whose actor dies (its process killed, its node
 lost) is handed to another actor, and a new actor replaces the dead one (up to ``max_replacements``): the
 caller, which alone writes results, sees every task's result exactly once, so nothing is lost or
 duplicated. The actors are the TorchRL-free half of the Ray backend; DQN training uses TorchRL's own
@@ -183,7 +183,7 @@ class RayPool:
     """``workers`` Ray actors (``cpus_per_worker`` CPUs each) with ``imap_unordered``; see the module docstring."""
 
     def __init__(self, workers: int, initializer: Callable | None = None, initargs: tuple = (), *,
-                 cpus_per_worker: float = 1.0, max_replacements: int | None = None):
+                 cpus_per_worker: float = 1.0, max_replacements: int | None = None, tasks_per_worker: int = 2):
         ray = import_ray()
         if not ray.is_initialized():
             raise RuntimeError("RayPool needs Ray up: use it inside `with ray_session(...)`")
@@ -192,6 +192,7 @@ class RayPool:
         self._ray = ray
         self._cls = ray.remote(num_cpus=cpus_per_worker, max_restarts=0)(_Worker)
         self._init = (initializer, initargs)
+        self.per_actor = max(1, int(tasks_per_worker))
         self.replacements_left = workers if max_replacements is None else int(max_replacements)
         self.actors = [self._spawn() for _ in range(workers)]
         self.deaths = 0
@@ -207,10 +208,11 @@ class RayPool:
         ray = self._ray
         queue = deque(tasks)
         in_flight: dict = {}                        # object ref -> (actor, task)
-        idle = list(self.actors)
+        # two tasks per actor: the next one waits in the actor's queue while the driver takes in a result
+        slots = [a for a in self.actors for _ in range(self.per_actor)]
         while queue or in_flight:
-            while queue and idle:
-                actor = idle.pop()
+            while queue and slots:
+                actor = slots.pop()
                 task = queue.popleft()
                 in_flight[actor.run.remote(fn, task)] = (actor, task)
             ready, _ = ray.wait(list(in_flight), num_returns=1)
@@ -218,18 +220,20 @@ class RayPool:
             try:
                 result = ray.get(ready[0])
             except _died(ray) as error:
-                self.deaths += 1
                 queue.appendleft(task)               # run again elsewhere: its result was never delivered
-                self.actors.remove(actor)
-                if self.replacements_left > 0:
-                    self.replacements_left -= 1
-                    replacement = self._spawn()
-                    self.actors.append(replacement)
-                    idle.append(replacement)
+                if actor in self.actors:             # the first of its tasks to report the death
+                    self.deaths += 1
+                    self.actors.remove(actor)
+                    slots = [a for a in slots if a is not actor]
+                    if self.replacements_left > 0:
+                        self.replacements_left -= 1
+                        replacement = self._spawn()
+                        self.actors.append(replacement)
+                        slots += [replacement] * self.per_actor
                 if not self.actors:
                     raise RuntimeError(f"every Ray worker died ({self.deaths}); the last error: {error}") from error
                 continue
-            idle.append(actor)
+            slots.append(actor)
             yield result
 
     def terminate(self) -> None:
