@@ -29,7 +29,8 @@ def main(cfg: DictConfig) -> None:
 
     backend = DemoBackend(DemoConfig(dataset=cfg.dataset, reward=OmegaConf.to_container(cfg.reward, resolve=True),
                                      runs=cfg.runs, vqa=tuple(cfg.vqa), max_pushes=cfg.max_pushes,
-                                     sessions=cfg.sessions, cache_dir=cfg.cache_dir, beta_steps=cfg.beta_steps))
+                                     sessions=cfg.sessions, cache_dir=cfg.cache_dir, beta_steps=cfg.beta_steps,
+                                     policy=cfg.policy))
     print(f"ready in {backend.startup_s:.1f} s\n{backend.status()}", flush=True)
     try:
         launch(backend, host=cfg.host, port=cfg.port)

@@ -90,7 +90,7 @@ def build_app(backend: DemoBackend) -> gr.Blocks:
         if request is not None and request.session_hash:
             backend.files.release(request.session_hash)
 
-    default_policy = (policies.trained or policies.names)[0]
+    default_policy = backend.default_policy
     # the live frames and episode videos Gradio caches are deleted an hour after they were made
     with gr.Blocks(title="MQA demo", analytics_enabled=False, delete_cache=CACHE_LIFETIME) as demo:
         gr.Markdown(INTRO)

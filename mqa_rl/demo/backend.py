@@ -50,6 +50,8 @@ class DemoConfig:
     cache_dir: str | Path = "~/.cache/mqa_rl/demo"   # rendered scene images, reused by later starts
     beta_steps: int | None = None            # β counter of the reward stack (None: its horizon, β = 0.5 as trained)
     videos_per_session: int = 3              # episode videos kept per browser session
+    policy: str | None = None                # the page's default policy: the first whose name holds this text
+                                             # (None, or no match: the first trained one)
 
 
 @dataclass
@@ -82,6 +84,8 @@ class DemoBackend:
         self.camera = env.base_env.camera
         self.catalog = SceneCatalog(self.dataset, self.camera, cfg.cache_dir)
         self.policies = PolicyRegistry(cfg.runs, env, cfg.max_pushes)
+        chosen = [n for n in self.policies.names if cfg.policy and cfg.policy in n]
+        self.default_policy = (chosen or self.policies.trained or self.policies.names)[0]
         self.vqa = VQARegistry(cfg.vqa)
         self.files = SessionFiles(tempfile.mkdtemp(prefix="mqa_demo_"))
         self.startup_s = time.perf_counter() - t0

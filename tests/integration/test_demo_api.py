@@ -267,8 +267,8 @@ def test_scene_filters_and_question_lists(served):
 
 
 def test_the_shipped_checkpoints_folder_offers_every_policy_and_the_students_learned_stop(small_dataset_dir):
-    """runs=checkpoints: the four shipped train_dqn runs, the student again with its fit_stop critic (matched by
-    the weights' fingerprint), and the VQA / encoder / recognition folders passed over, not listed as unusable;
+    """runs=checkpoints: the five shipped train_dqn runs, the student and the countable chain again with their fit_stop
+    critics (matched by the weights' fingerprint), and the VQA / encoder / recognition folders passed over, not listed as unusable;
     the student with its stop plays an episode that ends with the stop action or the push budget."""
     from mqa_rl.demo.policies import PolicyRegistry
     from mqa_rl.modules.learned_stop import LearnedStop
@@ -281,10 +281,11 @@ def test_the_shipped_checkpoints_folder_offers_every_policy_and_the_students_lea
         assert not registry.problems, registry.problems
         trained = registry.trained
         shipped_runs = {p.parent.parent.name for p in (root / "checkpoints").glob("*/checkpoints/checkpoint-*")}
-        assert len(shipped_runs) == 4
+        assert len(shipped_runs) == 5
         assert len([n for n in trained if "learned stop" not in n]) == len(shipped_runs)
-        stopping = [n for n in trained if "learned stop" in n]
-        assert len(stopping) == 1 and "dqn_geometric_student" in stopping[0] and "stop_geometric_student" in stopping[0]
+        stopping = sorted((n for n in trained if "learned stop" in n), key=lambda n: "dqn_countable" in n)
+        assert len(stopping) == 2 and "dqn_geometric_student" in stopping[0] and "stop_geometric_student" in stopping[0]
+        assert "dqn_countable" in stopping[1] and "stop_countable" in stopping[1]
         entry = registry.get(stopping[0])
         assert isinstance(entry.actor, LearnedStop) and entry.max_pushes == 10 and entry.actor.max_pushes == 10
         rollout = env.rollout(4, registry.make(stopping[0], seed=0), break_when_any_done=True)
