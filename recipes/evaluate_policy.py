@@ -119,8 +119,8 @@ def main(cfg: DictConfig) -> None:
              "video_episodes": int(cfg.video_episodes)}
     metrics: dict = {}
     units = []
-    for level in cfg.difficulties:
-        meta = episodes_meta(cfg, dataset, level, qtypes, max_pushes, reward, push_memory)
+    metas = {level: episodes_meta(cfg, dataset, level, qtypes, max_pushes, reward, push_memory) for level in cfg.difficulties}
+    for level, meta in metas.items():
         for name in cfg.policies:
             reused = reuse_baseline(cfg.baseline_from, name, meta) if cfg.baseline_from and name != "greedy" else None
             if reused is not None:
@@ -130,7 +130,7 @@ def main(cfg: DictConfig) -> None:
     try:
         if units:
             for unit, result in run_units(setup, units, cfg.backend, cfg.ray.address, int(cfg.workers)):
-                record_unit(out, cfg, dataset, qtypes, max_pushes, reward, push_memory, metrics, unit, result)
+                metrics[unit] = record_unit(out, metas[unit[0]], cfg.video_format, unit, result)
     finally:
         close_envs()
     results, lines = {}, []
@@ -157,17 +157,17 @@ def main(cfg: DictConfig) -> None:
     print(f"written to {out}")
 
 
-def record_unit(out: Path, cfg, dataset, qtypes, max_pushes, reward, push_memory, metrics: dict, unit, result) -> None:
-    """Write one finished unit's episodes (and videos) at once: a killed evaluation keeps what finished."""
+def record_unit(out: Path, meta: dict, video_format: str, unit: tuple[str, str], result) -> dict:
+    """Write one finished unit's episodes (and videos) at once, so a killed evaluation keeps what finished;
+    returns its per-episode metrics."""
     (level, name), (m, videos) = unit, result
-    meta = episodes_meta(cfg, dataset, level, qtypes, max_pushes, reward, push_memory)
     buffer = io.BytesIO()
     torch.save({"meta": meta, "metrics": m}, buffer)
     write_atomic(out / "episodes" / f"{name}_{level}.pt", buffer.getvalue())
     for i, frames in enumerate(videos):
-        write_video(frames, out / "videos" / f"{level}_{i}.{cfg.video_format}")
-    metrics[level, name] = m
+        write_video(frames, out / "videos" / f"{level}_{i}.{video_format}")
     print(f"  {level} {name}: {len(next(iter(m.values())))} episodes", flush=True)
+    return m
 
 
 if __name__ == "__main__":

@@ -32,28 +32,23 @@ from mqa_rl.modules.learned_stop import FEATURES, policy_fingerprint, policy_net
 from mqa_rl.modules.stop_margin import StopMargin
 from mqa_rl.modules.trained_policy import load_greedy, read_run_config
 from mqa_rl.training.optimal_stopping import fit_stop_critic, fixed_rules, stopped_chi
-from mqa_rl.transforms.episode_stats import mean_target_chi, targets_in_view
+from mqa_rl.transforms.episode_stats import mean_target_chi, uncountable_share
+from mqa_rl.transforms.mqa_env import make_mqa_env
+from mqa_rl.transforms.push_memory import memory_radius
 
 VALUES = ("chi", "uncountable")     # what the stop minimises; both are kept per state
 
 
-def uncountable_share(td) -> torch.Tensor:
-    """[...]: the share of the question's targets below the perfect counter's line (0 without targets)."""
-    targets = td.get(keys.TARGET_MASK)
-    missed = (targets & ~targets_in_view(td)).sum(-1).to(torch.float32)
-    return missed / targets.sum(-1).clamp(min=1)
-from mqa_rl.transforms.mqa_env import make_mqa_env
-from mqa_rl.transforms.push_memory import memory_radius
+def padded(x: torch.Tensor, length: int) -> torch.Tensor:
+    """``x`` cut or extended with its last row to ``length`` rows (an episode that ended early stays where it was)."""
+    pad = length - x.shape[0]
+    return torch.cat([x, x[-1:].expand(pad, *x.shape[1:])]) if pad > 0 else x[:length]
 
 
 def collect_level(env, policy, net, episodes: int, max_pushes: int) -> dict:
     """Never-stopping episodes of ``policy``: features [E, T, F], χ and the uncountable share [E, T + 1],
     valid [E, T], scene ids."""
     feats, chis, missed, valid, scenes = [], [], [], [], []
-
-    def padded(x):
-        return torch.cat([x, x[-1:].expand(pad)]) if pad > 0 else x[: max_pushes + 1]
-
     with torch.no_grad():
         for _ in range(episodes):
             rollout = env.rollout(max_pushes + 1, policy, break_when_any_done=True)
@@ -63,10 +58,9 @@ def collect_level(env, policy, net, episodes: int, max_pushes: int) -> dict:
             f = stop_features(net, rollout, max_pushes)
             chi = torch.cat([mean_target_chi(rollout).squeeze(-1), mean_target_chi(rollout["next"][-1:]).squeeze(-1)])
             miss = torch.cat([uncountable_share(rollout), uncountable_share(rollout["next"][-1:])])
-            pad = max_pushes - steps
-            feats.append(torch.cat([f, f[-1:].expand(pad, -1)]) if pad > 0 else f[:max_pushes])
-            chis.append(padded(chi))
-            missed.append(padded(miss))
+            feats.append(padded(f, max_pushes))
+            chis.append(padded(chi, max_pushes + 1))
+            missed.append(padded(miss, max_pushes + 1))
             valid.append(torch.arange(max_pushes) < min(steps, max_pushes))
             scenes.append(env.base_env.question.scene_id)
     if not feats:

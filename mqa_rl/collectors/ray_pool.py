@@ -9,8 +9,8 @@
 Each actor runs ``initializer(*initargs)`` once (it builds its env and policy) and then ``fn(task)`` for
 the tasks it is handed, one at a time, in a process whose module globals hold what the initializer built,
 as a pool worker's do. The driver keeps two tasks in flight per actor (one running, one queued, so an actor
-never waits for the driver) and hands the next one to whichever actor finishes first, so a slow node takes fewer. A task whose actor dies (its process killed, its node
-lost) is handed to another actor, and a new actor replaces the dead one (up to ``max_replacements``): the
+never waits for the driver) and hands the next one to whichever actor finishes first, so a slow node takes
+fewer. A task whose actor dies (its process killed, its node lost) is handed to another actor, and a new actor replaces the dead one (up to ``max_replacements``): the
 caller, which alone writes results, sees every task's result exactly once, so nothing is lost or
 duplicated. The actors are the TorchRL-free half of the Ray backend; DQN training uses TorchRL's own
 ``RayCollector`` (``mqa_rl.collectors.factory``).
@@ -97,9 +97,6 @@ class _Worker:
     def run(self, fn: Callable, task):
         return fn(task)
 
-    def pid(self) -> int:
-        return os.getpid()
-
 
 def _listening(address: str, timeout: float = 5.0) -> bool:
     host, _, port = address.rpartition(":")
@@ -134,13 +131,11 @@ def loopback_cluster(nodes: int = 2, cpus_per_node: int = 1):
         if done.returncode:
             raise RuntimeError(f"`ray {' '.join(args)}` failed: {done.stderr[-1500:]}")
 
-    def start(*args):
-        ray_cli_run("start", *args, *common)
     try:
         ray_cli_run("get-auth-token", "--generate")       # a fresh machine has no token yet
-        start("--head", f"--port={port}", "--include-dashboard=false")
+        ray_cli_run("start", "--head", f"--port={port}", "--include-dashboard=false", *common)
         for _ in range(nodes - 1):
-            start(f"--address={address}")
+            ray_cli_run("start", f"--address={address}", *common)
         with ray_session(address) as ray:             # wait until every node has joined
             session = ray._private.worker.global_worker.node.get_session_dir_path()
             deadline = time.time() + 60
@@ -199,10 +194,6 @@ class RayPool:
 
     def _spawn(self):
         return self._cls.remote(*self._init)
-
-    def pids(self) -> list[int]:
-        """The actors' process ids (``ray.get`` waits for them to be built)."""
-        return self._ray.get([a.pid.remote() for a in self.actors])
 
     def imap_unordered(self, fn: Callable, tasks: Iterable, chunksize: int = 1) -> Iterator:
         ray = self._ray

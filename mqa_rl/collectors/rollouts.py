@@ -155,15 +155,14 @@ def _exit_with_parent(parent: int) -> None:
             os._exit(1)
 
 
-def _worker_init(dataset_root: str, env_kwargs: dict, spec: dict, run: dict, parent: int) -> None:
-    torch.set_num_threads(1)
-    threading.Thread(target=_exit_with_parent, args=(parent,), daemon=True).start()
-    _WORKER.update(_build(dataset_root, env_kwargs, spec, run))
-
-
 def _ray_worker_init(dataset_root: str, env_kwargs: dict, spec: dict, run: dict) -> None:
     torch.set_num_threads(1)              # a Ray actor is not our child: Ray ends it with the run
     _WORKER.update(_build(dataset_root, env_kwargs, spec, run))
+
+
+def _worker_init(dataset_root: str, env_kwargs: dict, spec: dict, run: dict, parent: int) -> None:
+    threading.Thread(target=_exit_with_parent, args=(parent,), daemon=True).start()
+    _ray_worker_init(dataset_root, env_kwargs, spec, run)
 
 
 def _worker_episode(task: tuple[int, int, int]) -> dict:
@@ -175,7 +174,7 @@ def _worker_episode(task: tuple[int, int, int]) -> dict:
 class _InProcess:
     """The pool's interface in this process (workers ≤ 1): no start-up, easier to debug."""
 
-    def __init__(self, dataset_root: str, env_kwargs: dict, spec: dict, run: dict, parent: int):
+    def __init__(self, dataset_root: str, env_kwargs: dict, spec: dict, run: dict):
         self.state = _build(dataset_root, env_kwargs, spec, run)
 
     def imap_unordered(self, fn, tasks, chunksize=1):
@@ -223,15 +222,16 @@ def collect_rollouts(out_dir, *, dataset, policy, split: str, question_types=("c
             (ray_session(ray_address, num_cpus=workers) if backend == "ray" else contextlib.nullcontext()):
         done = store.done_slots()
         todo = [t for t in tasks if t[0] not in done]
-        initargs = (str(ds.root), env_kwargs, spec, run, os.getpid())
+        build = (str(ds.root), env_kwargs, spec, run)            # what each worker builds its env and policy from
         # a worker costs ~10 s to start (imports, SAPIEN, shader compile): not worth it for a few episodes
         in_process = backend == "local" and (workers <= 1 or len(todo) < IN_PROCESS_BELOW)
         if backend == "ray":
-            pool = RayPool(max(1, min(workers, len(todo))), _ray_worker_init, initargs[:-1])
+            pool = RayPool(max(1, min(workers, len(todo))), _ray_worker_init, build)
         elif in_process:
-            pool = _InProcess(*initargs)
+            pool = _InProcess(*build)
         else:
-            pool = mp.get_context("spawn").Pool(min(workers, len(todo)), initializer=_worker_init, initargs=initargs)
+            pool = mp.get_context("spawn").Pool(min(workers, len(todo)), initializer=_worker_init,
+                                                initargs=(*build, os.getpid()))
         bar = tqdm(total=len(tasks), initial=len(done), unit="episode", dynamic_ncols=True, disable=not progress,
                    desc=f"{spec['kind']} {split}")
         buffer: list[TensorDict] = []

@@ -32,6 +32,13 @@ def targets_in_view(td: TensorDictBase) -> torch.Tensor:
     return td.get(keys.TARGET_MASK) & (td.get(keys.VISIBLE_AREA) >= COUNTABLE_PX)
 
 
+def uncountable_share(td: TensorDictBase) -> torch.Tensor:
+    """[...]: the share of the question's targets below the perfect counter's line (0 without targets)."""
+    targets = td.get(keys.TARGET_MASK)
+    missed = (targets & ~targets_in_view(td)).sum(-1).to(torch.float32)
+    return missed / targets.sum(-1).clamp(min=1)
+
+
 class EpisodeStats(Transform):
     def __init__(self, terms: tuple[str, ...] = ()):
         self.terms = tuple(terms)
