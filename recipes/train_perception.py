@@ -140,8 +140,8 @@ def init_weights(model: CountingPerception, path: str) -> None:
     blob = load_versioned(path, PERCEPTION_FORMAT, PERCEPTION_VERSION, what="perception file (init_from)",
                           hint="name a perception.pt of recipes/train_perception.py")
     missing, unexpected = model.load_state_dict(blob["state_dict"], strict=False)
-    if unexpected or any(not k.startswith("density.") for k in missing):
-        raise ValueError(f"init_from={path} does not fit model.widths={list(model.widths)} "
+    if unexpected or any(not k.startswith(("density.", "detail.")) for k in missing):
+        raise ValueError(f"init_from={path} does not fit model.widths={list(model.widths)}, model.detail={model.detail_width} "
                          f"(missing {missing[:4]}, unexpected {unexpected[:4]}): match the architecture it was trained with")
     print(f"started from {path} (new heads: {sorted({k.split('.')[0] for k in missing}) or 'none'})")
 
@@ -173,9 +173,11 @@ def _train(cfg: DictConfig, out: Path) -> dict:
     frames = load_frames(list(cfg.frames.stores))
     metas = [read_meta(s) for s in cfg.frames.stores]
     sizes = {m["plan"]["size"] for m in metas}
-    if sizes != {int(cfg.model.image_size)}:
-        raise ValueError(f"the frames were rendered at {sorted(sizes)} px, model.image_size={cfg.model.image_size}: "
-                         f"collect frames at that size (collect_frames.py size=...) or set model.image_size")
+    want = int(cfg.model.image_size) * (2 if cfg.model.detail else 1)
+    if sizes != {want}:
+        raise ValueError(f"the frames were rendered at {sorted(sizes)} px, the perception reads {want} px "
+                         f"(model.image_size={cfg.model.image_size}, model.detail={cfg.model.detail}): collect frames at "
+                         f"that size (collect_frames.py size={want}) or set model.image_size / model.detail")
     classes = frames.get(keys.OBJECT_CLASSES)
     num_classes = int(cfg.model.num_classes)
     if int(classes.max()) >= num_classes:
@@ -202,7 +204,8 @@ def _train(cfg: DictConfig, out: Path) -> dict:
     if cfg.calibrate_only:                    # a run stopped early: choose its counting settings now
         return calibrate_file(out / PERCEPTION_FILE, val, device)
 
-    model = CountingPerception(num_classes, tuple(cfg.model.widths), int(cfg.model.image_size)).to(device)
+    model = CountingPerception(num_classes, tuple(cfg.model.widths), int(cfg.model.image_size),
+                               detail=int(cfg.model.detail)).to(device)
     if cfg.init_from:
         init_weights(model, cfg.init_from)
     loss = PerceptionLoss(model, vote_weight=cfg.train.vote_weight, density_weight=cfg.train.density_weight)
@@ -243,7 +246,7 @@ def _train(cfg: DictConfig, out: Path) -> dict:
                 rgb, omap = augment(rgb, omap)
             batch = {keys.OBJECT_MAP: omap.to(device), keys.OBJECT_CLASSES: cls_all[idx].to(device),
                      keys.FRAME_VISIBLE: vis_all[idx].to(device)}
-            td = loss(TensorDict(batch, batch_size=[len(idx)]), standardise(rgb.to(device), model.image_size))
+            td = loss(TensorDict(batch, batch_size=[len(idx)]), standardise(rgb.to(device), model.input_size))
             optim.zero_grad()
             loss.total(td).backward()
             torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.train.max_grad_norm)

@@ -2,6 +2,9 @@
 
     rgb uint8 [B, 3, 224, 224] → resized to ``image_size`` (112) → encoder (stride 2, 4, 8, 16)
                                → decoder with skips → [B, W, 56, 56]
+    (``detail`` > 0: a second path reads the full 2 × ``image_size`` render through two stride-2 stages
+     and adds what it sees to the first stage's 56 × 56 map: small targets are 5-25 px at 112 px,
+     20-100 px in the render. Its last layer starts at zero, so a file without it warm-starts one with it.)
                                → class logits [B, K, 56, 56]   (K = 1 + dataset classes; 0 = bin)
                                → centre votes  [B, 2, 56, 56]   (offset of each cell to its object's centre)
                                → density       [B, 1, 56, 56]   (each countable object's unit mass, spread
@@ -54,9 +57,11 @@ class CountingPerception(nn.Module):
     density [B, 1, S/2, S/2] ≥ 0).
 
     ``widths``: channels at strides 2, 4, 8, 16 (the deepest sees ~100 px of the 112-px input: the
-    whole of the largest object). Votes are in output cells, relative to the cell's centre."""
+    whole of the largest object). ``detail``: channels of the full-resolution path (0: none; with it the
+    input is 2 × ``image_size``). Votes are in output cells, relative to the cell's centre."""
 
-    def __init__(self, num_classes: int, widths=(32, 48, 96, 128), image_size: int = 112, counting: dict | None = None):
+    def __init__(self, num_classes: int, widths=(32, 48, 96, 128), image_size: int = 112, counting: dict | None = None,
+                 detail: int = 0):
         super().__init__()
         unknown = set(counting or {}) - set(vote_counting.DEFAULT_COUNTING)
         if unknown:
@@ -66,11 +71,18 @@ class CountingPerception(nn.Module):
             raise ValueError(f"widths must name 4 stages (strides 2, 4, 8, 16), got {list(widths)}")
         if image_size % 16:
             raise ValueError(f"image_size must be a multiple of 16, got {image_size}")
+        if detail < 0:
+            raise ValueError(f"detail must be ≥ 0 channels (0: no full-resolution path), got {detail}")
         self.num_classes = int(num_classes)
         self.widths = tuple(int(w) for w in widths)
         self.image_size = int(image_size)
         w1, w2, w3, w4 = self.widths
         self.down = nn.ModuleList([_block(3, w1, 2), _block(w1, w2, 2), _block(w2, w3, 2), _block(w3, w4, 2)])
+        self.detail_width = int(detail)
+        if detail:
+            self.detail = nn.Sequential(_block(3, detail, 2), _block(detail, w1, 2), nn.Conv2d(w1, w1, 1))
+            nn.init.zeros_(self.detail[-1].weight)
+            nn.init.zeros_(self.detail[-1].bias)
         self.up3 = _block(w4 + w3, w3, 1)
         self.up2 = _block(w3 + w2, w2, 1)
         self.up1 = _block(w2 + w1, w1, 1)
@@ -84,14 +96,24 @@ class CountingPerception(nn.Module):
         return self.image_size // 2
 
     @property
+    def input_size(self) -> int:
+        """The side of the standardised image ``forward`` takes (the full render with the detail path)."""
+        return self.image_size * (2 if self.detail_width else 1)
+
+    @property
     def cell_px(self) -> float:
         """Pixels of the 224-px render one output cell covers (16 at 112 px in, 56 out)."""
         return (RENDER_SIZE / self.out_size) ** 2
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         skips = []
-        for stage in self.down:
+        full = x
+        if self.detail_width:
+            x = F.interpolate(x, size=(self.image_size, self.image_size), mode="bilinear", align_corners=False, antialias=True)
+        for i, stage in enumerate(self.down):
             x = stage(x)
+            if i == 0 and self.detail_width:
+                x = x + self.detail(full)
             skips.append(x)
         s1, s2, s3, x = skips
         for up, skip in ((self.up3, s3), (self.up2, s2), (self.up1, s1)):
@@ -101,7 +123,7 @@ class CountingPerception(nn.Module):
 
     def predict(self, rgb: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """uint8 rgb [B, 3, H, W] → (class probabilities [B, K, s, s], votes [B, 2, s, s], density [B, 1, s, s])."""
-        logits, votes, density = self(standardise(rgb, self.image_size))
+        logits, votes, density = self(standardise(rgb, self.input_size))
         return logits.softmax(1), votes, density
 
     def count_features(self, rgb: torch.Tensor) -> torch.Tensor:
@@ -117,7 +139,7 @@ class CountingPerception(nn.Module):
 
     def config(self) -> dict:
         return {"num_classes": self.num_classes, "widths": list(self.widths), "image_size": self.image_size,
-                "counting": dict(self.counting)}
+                "counting": dict(self.counting), "detail": self.detail_width}
 
 
 def save_perception(model: CountingPerception, path: str | Path, meta: dict) -> Path:

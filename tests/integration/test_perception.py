@@ -173,6 +173,9 @@ def test_frames_perception_and_counting_vqa_recipes_end_to_end(small_dataset, sp
     out = tmp_path / "perception"
     targs = [*quiet, f"frames.stores=[{frames}]", f"out_dir={out}", "model.widths=[8,8,16,16]", "train.batch_size=2",
              "train.eval_interval=2", "checkpoint.interval_steps=2", "train.val_fraction=0.4", "train.warmup_steps=1"]
+    with pytest.raises(ValueError, match="size=224"):                 # the detail path needs full-size frames
+        train.train(compose_recipe_config("train_perception", [*targs, "train.steps=2", "model.detail=4"]))
+    assert not (out / "checkpoints").exists()
     first = train.train(compose_recipe_config("train_perception", [*targs, "train.steps=2"]))
     assert first["steps"] == 2 and (out / "perception.pt").exists()
     with pytest.raises(FileExistsError, match="resume=true"):
@@ -221,3 +224,23 @@ def test_the_shipped_counting_vqas_load_with_their_provenance_and_answer(system,
     frame = torch.full((1, 224, 224, 3), 128, dtype=torch.uint8)
     probs = model.answer_probs(model.tokenize(["How many cans are there in the bin?"]), frame, frame)
     assert probs.shape == (1, len(model.answers)) and torch.allclose(probs.sum(-1), torch.ones(1))
+
+
+def test_the_detail_path_reads_the_full_render_and_warm_starts_from_a_file_without_it(tmp_path):
+    torch.manual_seed(0)
+    base = CountingPerception(K, widths=(8, 8, 16, 16)).eval()
+    detail = CountingPerception(K, widths=(8, 8, 16, 16), detail=4)
+    assert detail.input_size == 224 and detail.out_size == base.out_size == 56
+    missing, unexpected = detail.load_state_dict(base.state_dict(), strict=False)
+    assert not unexpected and missing and all(k.startswith("detail.") for k in missing)
+    detail.eval()
+    rgb = torch.randint(0, 255, (2, 3, 224, 224), dtype=torch.uint8)
+    for a, b in zip(base.predict(rgb), detail.predict(rgb)):            # its last layer starts at zero
+        assert torch.allclose(a, b, atol=1e-5)
+    with torch.no_grad():
+        detail.detail[-1].bias.fill_(1.0)
+    assert not torch.allclose(base.predict(rgb)[0], detail.predict(rgb)[0], atol=1e-3)   # and it is read
+    loaded, _ = load_perception(save_perception(detail, tmp_path / "p.pt", {}))
+    assert loaded.detail_width == 4 and torch.equal(loaded.predict(rgb)[2], detail.predict(rgb)[2])
+    with pytest.raises(ValueError, match="detail"):
+        CountingPerception(K, detail=-1)
