@@ -45,12 +45,11 @@ REPORTED = ("reward", "pushes", "final_simple", "chi_end", "chi_change", "hidden
 
 
 def episodes_meta(cfg: DictConfig, dataset, level: str, qtypes, max_pushes: int, reward: dict,
-                  push_memory: int | None = None, idle_memory: int | None = None) -> dict:
+                  push_memory: int | None = None) -> dict:
     """What makes two evaluations' episodes the same questions (and the same reward)."""
     return {"dataset": str(Path(dataset).resolve()), "split": cfg.split, "seed": int(cfg.seed), "level": level,
             "episodes": int(cfg.episodes_per_level), "max_pushes": max_pushes, "pusher": cfg.pusher,
-            "question_types": list(qtypes) if qtypes else None, "reward": reward, "push_memory": push_memory,
-            **({"idle_memory": idle_memory} if idle_memory is not None else {})}
+            "question_types": list(qtypes) if qtypes else None, "reward": reward, "push_memory": push_memory}
 
 
 def shown(stat: dict, sep: str = " ± ") -> str:
@@ -80,7 +79,7 @@ def reuse_baseline(folder, name: str, meta: dict) -> dict[str, torch.Tensor] | N
         return None
     saved = load_tensors(path, what="baseline episodes file", hint="delete it (or give another baseline_from=) to evaluate again")
     # the reward is checked below; the paper's random never reads the action mask, so PushMemory leaves it alone
-    ignored = ("reward", "push_memory", "idle_memory") if name == "random" else ("reward",)
+    ignored = ("reward", "push_memory") if name == "random" else ("reward",)
     same = {k: v for k, v in meta.items() if k not in ignored}
     if {k: saved["meta"].get(k) for k in same} != same:
         print(f"  {path}: other questions or settings, not reused")
@@ -113,17 +112,14 @@ def main(cfg: DictConfig) -> None:
     max_pushes = int(run_cfg.env.max_pushes) if run_cfg else 10
     qtypes = cfg.question_types or (list(run_cfg.env.question_types) if run_cfg else None)
     push_memory = memory_radius(cfg.push_memory, run_cfg.env if run_cfg else None)
-    idle_memory = None if cfg.idle_memory is None or int(cfg.idle_memory) < 0 else int(cfg.idle_memory)
-    if idle_memory is not None and push_memory is None:
-        raise ValueError(f"idle_memory={cfg.idle_memory} extends the push memory, which this run has off: give push_memory=<radius ≥ 0> too")
     setup = {"dataset": str(dataset), "reward": reward, "split": cfg.split, "qtypes": qtypes, "max_pushes": max_pushes,
-             "pusher": cfg.pusher, "push_memory": push_memory, "idle_memory": idle_memory, "seed": int(cfg.seed), "episodes": int(cfg.episodes_per_level),
+             "pusher": cfg.pusher, "push_memory": push_memory, "seed": int(cfg.seed), "episodes": int(cfg.episodes_per_level),
              "threshold": float(reward.get("simple_threshold", 0.2)), "run": str(cfg.run) if cfg.run else None,
              "checkpoint": cfg.checkpoint, "stop_margin": cfg.stop_margin, "stop_critic": cfg.stop_critic,
              "video_episodes": int(cfg.video_episodes)}
     metrics: dict = {}
     units = []
-    metas = {level: episodes_meta(cfg, dataset, level, qtypes, max_pushes, reward, push_memory, idle_memory) for level in cfg.difficulties}
+    metas = {level: episodes_meta(cfg, dataset, level, qtypes, max_pushes, reward, push_memory) for level in cfg.difficulties}
     for level, meta in metas.items():
         for name in cfg.policies:
             reused = reuse_baseline(cfg.baseline_from, name, meta) if cfg.baseline_from and name != "greedy" else None

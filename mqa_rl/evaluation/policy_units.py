@@ -40,8 +40,7 @@ def unit_env(setup: dict, level: str):
     if level not in _ENVS:
         _ENVS[level] = make_mqa_env(setup["dataset"], setup["reward"], episode_stats=True, split=setup["split"],
                                     difficulties=[level], question_types=setup["qtypes"], max_pushes=setup["max_pushes"],
-                                    pusher=setup["pusher"], push_memory=setup["push_memory"],
-                                    idle_memory=setup.get("idle_memory"))
+                                    pusher=setup["pusher"], push_memory=setup["push_memory"])
     return _ENVS[level]
 
 

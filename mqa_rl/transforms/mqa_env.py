@@ -23,16 +23,12 @@ from mqa_rl.transforms.push_memory import PushMemory
 
 
 def make_mqa_env(dataset, reward: Mapping | None = None, counter: torch.Tensor | None = None,
-                 episode_stats: bool = False, push_memory: int | None = None, idle_memory: int | None = None,
-                 **env_kwargs):
+                 episode_stats: bool = False, push_memory: int | None = None, **env_kwargs):
     """``SapienBinEnv(dataset, **env_kwargs)``, wrapped with ``make_reward_transform(reward)`` if given,
     with ``EpisodeStats`` over the reward and its terms when ``episode_stats`` (training, evaluation), and
-    with ``PushMemory(push_memory, idle_memory)`` (no push twice in an episode, the radius in grid cells; and
-    no push of any direction near one that changed nothing in the image) unless ``push_memory`` is None."""
-    if idle_memory is not None and push_memory is None:
-        raise ValueError("idle_memory extends the push memory: give push_memory too (a radius ≥ 0)")
+    with ``PushMemory(push_memory)`` (no push twice in an episode; the radius in grid cells) unless None."""
     env = SapienBinEnv(dataset, **env_kwargs)
-    memory = PushMemory(push_memory, idle_memory) if push_memory is not None else None
+    memory = PushMemory(push_memory) if push_memory is not None else None
     if reward is None:
         return env if memory is None else TransformedEnv(env, memory)
     stack = make_reward_transform(reward, push_length=env.push_length, counter=counter)

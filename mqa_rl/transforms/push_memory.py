@@ -12,15 +12,6 @@ push itself and the pushes of the same direction starting within ``radius`` grid
 removes them from the next ``action_mask``: greedy and ε-greedy choose among the pushes not yet made;
 stop stays allowed. Cleared at reset. State lives in the tensordict (like ``EpisodeStats``), so it
 works in batched envs, collectors and replay.
-
-``idle_radius`` adds a memory of what did not work (the paper's future work: "remember the last
-manipulation taken to output more efficient and non-repetitive manipulations"): a push after which the
-image barely changed (fewer than ``idle_pixels`` pixels changed by more than ``IDLE_LEVEL`` grey levels
-summed over rgb: the finger met nothing, or nothing that moves) marks every push, *in every direction*,
-starting within ``idle_radius`` cells of it. Read from the two images the policy sees, not the simulator.
-The line: on 96 random pushes of training piles, those that moved some object by ≥ 5 mm changed ≥ 657
-pixels, those that moved none changed 0-1,607 (objects shifting 1-4 mm still redraw their edges); below 600
-a push is idle by both readings (about two thirds of the idle ones, no false alarm).
 """
 
 from __future__ import annotations
@@ -42,26 +33,11 @@ def memory_radius(override, run_env) -> int | None:
     return None if radius is None or int(radius) < 0 else int(radius)
 
 
-IDLE_LEVEL = 30              # a pixel changed when its |Δr| + |Δg| + |Δb| exceeds this (of 765)
-
-
-def changed_pixels(before: torch.Tensor, after: torch.Tensor) -> torch.Tensor:
-    """[*B] pixels of uint8 rgb [*B, 3, H, W] that changed by more than ``IDLE_LEVEL`` summed grey levels."""
-    diff = (after.to(torch.int16) - before.to(torch.int16)).abs().sum(-3)
-    return (diff > IDLE_LEVEL).flatten(-2).sum(-1)
-
-
 class PushMemory(Transform):
-    def __init__(self, radius: int = 1, idle_radius: int | None = None, idle_pixels: int = 600):
+    def __init__(self, radius: int = 1):
         if radius < 0:
             raise ValueError(f"push_memory radius must be ≥ 0 grid cells, got {radius}")
-        if idle_radius is not None and idle_radius < 0:
-            raise ValueError(f"idle_memory radius must be ≥ 0 grid cells (null: none), got {idle_radius}")
-        if idle_pixels < 1:
-            raise ValueError(f"idle_pixels must be ≥ 1, got {idle_pixels}")
         self.radius = int(radius)
-        self.idle_radius = None if idle_radius is None else int(idle_radius)
-        self.idle_pixels = int(idle_pixels)
         super().__init__(in_keys=[keys.ACTION_MASK], out_keys=[keys.PUSHED])
 
     def _reset(self, tensordict, tensordict_reset):
@@ -71,11 +47,7 @@ class PushMemory(Transform):
         return tensordict_reset
 
     def _step(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> TensorDictBase:
-        action = tensordict.get(keys.ACTION)
-        pushed = tensordict.get(keys.PUSHED) | self._neighbourhood(action)
-        if self.idle_radius is not None:
-            idle = changed_pixels(tensordict.get(keys.RGB), next_tensordict.get(keys.RGB)) < self.idle_pixels
-            pushed = pushed | (self._spot(action) & idle.unsqueeze(-1))
+        pushed = tensordict.get(keys.PUSHED) | self._neighbourhood(tensordict.get(keys.ACTION))
         next_tensordict.set(keys.PUSHED, pushed)
         mask = next_tensordict.get(keys.ACTION_MASK).clone()
         mask[..., : actions.NUM_PUSHES] &= ~pushed
@@ -90,17 +62,6 @@ class PushMemory(Transform):
         grid = hit[:, : actions.NUM_PUSHES].view(-1, actions.DIRECTIONS, actions.GRID, actions.GRID)
         if self.radius:
             grid = F.max_pool2d(grid, 2 * self.radius + 1, 1, self.radius)
-        return grid.reshape(*action.shape, actions.NUM_PUSHES) > 0
-
-    def _spot(self, action: torch.Tensor) -> torch.Tensor:
-        """bool [*B, NUM_PUSHES]: the pushes of every direction starting within ``idle_radius`` of ``action``'s start."""
-        flat = action.reshape(-1)
-        hit = torch.zeros(len(flat), actions.NUM_ACTIONS, device=flat.device)
-        hit[torch.arange(len(flat)), flat] = 1.0
-        grid = hit[:, : actions.NUM_PUSHES].view(-1, actions.DIRECTIONS, actions.GRID, actions.GRID).amax(1, keepdim=True)
-        if self.idle_radius:
-            grid = F.max_pool2d(grid, 2 * self.idle_radius + 1, 1, self.idle_radius)
-        grid = grid.expand(-1, actions.DIRECTIONS, -1, -1)
         return grid.reshape(*action.shape, actions.NUM_PUSHES) > 0
 
     def transform_observation_spec(self, spec: Composite) -> Composite:

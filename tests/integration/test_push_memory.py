@@ -3,7 +3,6 @@
 import pytest
 import torch
 from omegaconf import OmegaConf
-from tensordict import TensorDict
 from torchrl.envs.utils import check_env_specs
 
 from mqa_rl import keys
@@ -58,23 +57,3 @@ def test_env_mask_drops_pushes_made_this_episode_until_reset(small_dataset):
     assert not after[keys.ACTION_MASK][push] and not after[keys.ACTION_MASK][second]   # the episode's memory adds up
     td = env.reset()
     assert not td[keys.PUSHED].any()                     # a new episode forgets
-
-
-def test_idle_memory_marks_every_direction_around_a_push_that_changed_nothing():
-    memory = PushMemory(radius=0, idle_radius=1)
-    push = actions.encode(3, 10, 10)
-    rgb = torch.randint(0, 255, (2, 3, 32, 32), dtype=torch.uint8)
-    moved = rgb.clone()
-    moved[1, :, :20] = 255 - moved[1, :, :20]                       # episode 1's push changed 640 pixels
-    td = TensorDict({keys.ACTION: torch.tensor([push, push]), keys.RGB: rgb,
-                     keys.PUSHED: torch.zeros(2, actions.NUM_PUSHES, dtype=torch.bool)}, batch_size=[2])
-    nxt = TensorDict({keys.RGB: moved, keys.ACTION_MASK: torch.ones(2, actions.NUM_ACTIONS, dtype=torch.bool)}, batch_size=[2])
-    out = memory._step(td, nxt)
-    idle, busy = (out[keys.PUSHED][i].view(actions.DIRECTIONS, actions.GRID, actions.GRID) for i in (0, 1))
-    assert idle.sum() == actions.DIRECTIONS * 9 and idle[:, 9:12, 9:12].all()   # every direction, 3 x 3 starts
-    assert busy.sum() == 1 and busy[3, 10, 10]                                  # a push that changed the image: itself only
-    assert not out[keys.ACTION_MASK][0, actions.encode(0, 11, 9)] and out[keys.ACTION_MASK][0, actions.STOP]
-    with pytest.raises(ValueError, match="idle_memory"):
-        PushMemory(radius=1, idle_radius=-2)
-    with pytest.raises(ValueError, match="push_memory too"):
-        make_mqa_env("unused", None, idle_memory=1)

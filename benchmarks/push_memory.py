@@ -1,12 +1,12 @@
-"""Is a memory of pushes that changed nothing worth it? The same policy on the same questions without and with
-``idle_memory`` (``PushMemory``: after a push that changed almost nothing in the image, no push of any direction
-near it for the rest of the episode), paired by question, 95 % intervals that resample whole scenes.
+"""What is a push memory worth to a policy? The same policy on the same questions under two ``push_memory``
+settings (``PushMemory``: no push twice in an episode; -1: none), paired by question, 95 % intervals that
+resample whole scenes: pushes that moved nothing (5 mm), pushes, χ at the end, targets fully hidden at the end,
+net targets made countable, the perfect counter on I_stop.
 
-    python recipes/evaluate_policy.py run=checkpoints/dqn_geometric_student stop_critic=checkpoints/stop_geometric_student \
-        'policies=[greedy]' episodes_per_level=150 out_dir=runs/idle/today
-    python recipes/evaluate_policy.py run=checkpoints/dqn_geometric_student stop_critic=checkpoints/stop_geometric_student \
-        'policies=[greedy]' episodes_per_level=150 idle_memory=1 out_dir=runs/idle/memory
-    python benchmarks/idle_memory.py runs/idle/today runs/idle/memory
+    A="run=checkpoints/dqn_geometric_student stop_critic=checkpoints/stop_geometric_student policies=[greedy] episodes_per_level=150"
+    python recipes/evaluate_policy.py $A out_dir=runs/memory/none                 # the run's own memory (none)
+    python recipes/evaluate_policy.py $A push_memory=1 out_dir=runs/memory/twice   # no push twice (radius 1)
+    python benchmarks/push_memory.py runs/memory/none runs/memory/twice
 """
 
 from __future__ import annotations
@@ -32,14 +32,15 @@ def load(folder: Path, level: str) -> tuple[dict, dict]:
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("today", type=Path, help="evaluate_policy out_dir without idle_memory")
-    p.add_argument("memory", type=Path, help="evaluate_policy out_dir of the same run and questions with idle_memory")
+    p.add_argument("first", type=Path, help="evaluate_policy out_dir under one push memory")
+    p.add_argument("second", type=Path, help="evaluate_policy out_dir of the same run and questions under another")
     p.add_argument("--levels", nargs="+", default=["easy", "medium", "hard"])
     a = p.parse_args()
-    print("| level | measure | today | with idle memory | memory − today (95 % by scene) |\n|---|---|---|---|---|")
+    one, two = a.first.name, a.second.name
+    print(f"| level | measure | {one} | {two} | {two} − {one} (95 % by scene) |\n|---|---|---|---|---|")
     for level in a.levels:
-        (meta_a, m_a), (meta_b, m_b) = load(a.today, level), load(a.memory, level)
-        differ = {k for k in set(meta_a) | set(meta_b) if k != "idle_memory" and meta_a.get(k) != meta_b.get(k)}
+        (meta_a, m_a), (meta_b, m_b) = load(a.first, level), load(a.second, level)
+        differ = {k for k in set(meta_a) | set(meta_b) if k != "push_memory" and meta_a.get(k) != meta_b.get(k)}
         if differ or not torch.equal(m_a["scene"], m_b["scene"]):
             raise SystemExit(f"{level}: the two evaluations ran other questions or settings ({sorted(differ) or 'scenes'}): "
                              f"run both with the same run, dataset, split, seed and episodes_per_level")
