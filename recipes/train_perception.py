@@ -38,8 +38,8 @@ from mqa_rl.files import load_versioned, write_atomic
 from mqa_rl.losses.perception import PerceptionLoss, countable_counts
 from mqa_rl.modules import vote_counting
 from mqa_rl.data.dataset import LEVELS
-from mqa_rl.modules.perception import (PERCEPTION_FORMAT, PERCEPTION_VERSION, CountingPerception, load_perception,
-                                       save_perception)
+from mqa_rl.modules.perception import (PERCEPTION_FORMAT, PERCEPTION_VERSION, CountingPerception, input_size,
+                                       load_perception, save_perception)
 from mqa_rl.modules.vqa_encoder import standardise
 from mqa_rl.training.model_checkpoint import ModelCheckpoint
 from mqa_rl.training.resume_guard import RESUMABLE, refuse_changed_config
@@ -173,7 +173,7 @@ def _train(cfg: DictConfig, out: Path) -> dict:
     frames = load_frames(list(cfg.frames.stores))
     metas = [read_meta(s) for s in cfg.frames.stores]
     sizes = {m["plan"]["size"] for m in metas}
-    want = int(cfg.model.image_size) * (2 if cfg.model.detail else 1)
+    want = input_size(cfg.model.image_size, cfg.model.detail)
     if sizes != {want}:
         raise ValueError(f"the frames were rendered at {sorted(sizes)} px, the perception reads {want} px "
                          f"(model.image_size={cfg.model.image_size}, model.detail={cfg.model.detail}): collect frames at "

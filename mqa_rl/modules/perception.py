@@ -2,13 +2,14 @@
 
     rgb uint8 [B, 3, 224, 224] → resized to ``image_size`` (112) → encoder (stride 2, 4, 8, 16)
                                → decoder with skips → [B, W, 56, 56]
-    (``detail`` > 0: a second path reads the full 2 × ``image_size`` render through two stride-2 stages
-     and adds what it sees to the first stage's 56 × 56 map: small targets are 5-25 px at 112 px,
-     20-100 px in the render. Its last layer starts at zero, so a file without it warm-starts one with it.)
                                → class logits [B, K, 56, 56]   (K = 1 + dataset classes; 0 = bin)
                                → centre votes  [B, 2, 56, 56]   (offset of each cell to its object's centre)
                                → density       [B, 1, 56, 56]   (each countable object's unit mass, spread
                                                                  over its visible cells)
+
+With ``detail`` > 0 a second path reads the full 2 × ``image_size`` render through two stride-2 stages and
+adds what it sees to the first stage's 56 × 56 map (small targets are 5-25 px at 112 px, 20-100 px in the
+render). Its last layer starts at zero, so a file without it warm-starts one with it.
 
 Counting needs instances, not class areas: a perfect class mask split into connected components
 counts 0.80 / 0.61 / 0.48 of the test questions right where a perfect instance counter gets 0.96 /
@@ -44,6 +45,11 @@ PERCEPTION_FORMAT = "mqa_rl.perception"
 PERCEPTION_VERSION = 2        # 2: the density head
 RENDER_SIZE = 224          # the env's image size: areas and the counting rule are in its pixels
 DENSITY_BIAS = -5.0        # softplus(-5) ≈ 0.007 per cell: ~20 objects over 56 × 56 cells at the start
+
+
+def input_size(image_size: int, detail: int) -> int:
+    """The side of the standardised image a perception takes: the full render (2 × ``image_size``) with the detail path."""
+    return int(image_size) * (2 if detail else 1)
 
 
 def _block(cin: int, cout: int, stride: int) -> nn.Sequential:
@@ -97,8 +103,7 @@ class CountingPerception(nn.Module):
 
     @property
     def input_size(self) -> int:
-        """The side of the standardised image ``forward`` takes (the full render with the detail path)."""
-        return self.image_size * (2 if self.detail_width else 1)
+        return input_size(self.image_size, self.detail_width)
 
     @property
     def cell_px(self) -> float:
@@ -106,14 +111,15 @@ class CountingPerception(nn.Module):
         return (RENDER_SIZE / self.out_size) ** 2
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        skips = []
-        full = x
-        if self.detail_width:
-            x = F.interpolate(x, size=(self.image_size, self.image_size), mode="bilinear", align_corners=False, antialias=True)
-        for i, stage in enumerate(self.down):
+        if self.detail_width:          # the main path reads the render at image_size, the detail path in full
+            small = F.interpolate(x, size=(self.image_size, self.image_size), mode="bilinear", align_corners=False,
+                                  antialias=True)
+            x = self.down[0](small) + self.detail(x)
+        else:
+            x = self.down[0](x)
+        skips = [x]
+        for stage in self.down[1:]:
             x = stage(x)
-            if i == 0 and self.detail_width:
-                x = x + self.detail(full)
             skips.append(x)
         s1, s2, s3, x = skips
         for up, skip in ((self.up3, s3), (self.up2, s2), (self.up1, s1)):
