@@ -38,7 +38,7 @@ from mqa_rl.files import load_versioned, write_atomic
 from mqa_rl.losses.perception import PerceptionLoss, countable_counts
 from mqa_rl.modules import vote_counting
 from mqa_rl.data.dataset import LEVELS
-from mqa_rl.modules.perception import (PERCEPTION_FORMAT, PERCEPTION_VERSION, CountingPerception, input_size,
+from mqa_rl.modules.perception import (BACKBONES, PERCEPTION_FORMAT, PERCEPTION_VERSION, CountingPerception, input_size,
                                        load_perception, save_perception)
 from mqa_rl.modules.vqa_encoder import standardise
 from mqa_rl.training.model_checkpoint import ModelCheckpoint
@@ -63,6 +63,10 @@ def check_config(cfg: DictConfig) -> None:
         raise ValueError(f"train.val_fraction={t.val_fraction} must lie in (0, 1): the checkpoint is chosen on held-out scenes")
     if t.lr <= 0 or t.warmup_steps < 0:
         raise ValueError(f"train.lr ({t.lr}) must be > 0 and train.warmup_steps ({t.warmup_steps}) ≥ 0")
+    if cfg.model.backbone not in BACKBONES:
+        raise ValueError(f"model.backbone={cfg.model.backbone!r} is not one of {list(BACKBONES)}")
+    if cfg.model.imagenet and cfg.model.backbone == "unet":
+        raise ValueError("model.imagenet=true needs model.backbone=efficientnet_lite0 (ImageNet weights exist for it only)")
     for store in cfg.frames.stores:
         read_meta(store)                     # FileNotFoundError naming the recipe that collects it
 
@@ -173,11 +177,12 @@ def _train(cfg: DictConfig, out: Path) -> dict:
     frames = load_frames(list(cfg.frames.stores))
     metas = [read_meta(s) for s in cfg.frames.stores]
     sizes = {m["plan"]["size"] for m in metas}
-    want = input_size(cfg.model.image_size, cfg.model.detail)
+    want = input_size(cfg.model.image_size, cfg.model.detail, cfg.model.backbone)
     if sizes != {want}:
         raise ValueError(f"the frames were rendered at {sorted(sizes)} px, the perception reads {want} px "
-                         f"(model.image_size={cfg.model.image_size}, model.detail={cfg.model.detail}): collect frames at "
-                         f"that size (collect_frames.py size={want}) or set model.image_size / model.detail")
+                         f"(model.image_size={cfg.model.image_size}, model.detail={cfg.model.detail}, model.backbone={cfg.model.backbone}): "
+                         f"collect frames at that size (collect_frames.py size={want}) or set model.image_size / "
+                         f"model.detail / model.backbone")
     classes = frames.get(keys.OBJECT_CLASSES)
     num_classes = int(cfg.model.num_classes)
     if int(classes.max()) >= num_classes:
@@ -205,7 +210,10 @@ def _train(cfg: DictConfig, out: Path) -> dict:
         return calibrate_file(out / PERCEPTION_FILE, val, device)
 
     model = CountingPerception(num_classes, tuple(cfg.model.widths), int(cfg.model.image_size),
-                               detail=int(cfg.model.detail)).to(device)
+                               detail=int(cfg.model.detail), backbone=cfg.model.backbone)
+    if cfg.model.imagenet:
+        model.load_imagenet()
+    model.to(device)
     if cfg.init_from:
         init_weights(model, cfg.init_from)
     loss = PerceptionLoss(model, vote_weight=cfg.train.vote_weight, density_weight=cfg.train.density_weight)

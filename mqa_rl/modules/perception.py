@@ -39,6 +39,7 @@ from torch import nn
 
 from mqa_rl.files import load_versioned, save_versioned
 from mqa_rl.modules import vote_counting
+from mqa_rl.modules.imagenet_backbone import EfficientLiteEncoder
 from mqa_rl.modules.vqa_encoder import standardise
 
 PERCEPTION_FORMAT = "mqa_rl.perception"
@@ -47,9 +48,13 @@ RENDER_SIZE = 224          # the env's image size: areas and the counting rule a
 DENSITY_BIAS = -5.0        # softplus(-5) ≈ 0.007 per cell: ~20 objects over 56 × 56 cells at the start
 
 
-def input_size(image_size: int, detail: int) -> int:
-    """The side of the standardised image a perception takes: the full render (2 × ``image_size``) with the detail path."""
-    return int(image_size) * (2 if detail else 1)
+BACKBONES = ("unet", "efficientnet_lite0")
+
+
+def input_size(image_size: int, detail: int, backbone: str = "unet") -> int:
+    """The side of the standardised image a perception takes: the full render (2 × ``image_size``) with the
+    detail path or the ImageNet backbone (whose finest map is at stride 4), else ``image_size``."""
+    return int(image_size) * (2 if detail or backbone != "unet" else 1)
 
 
 def _block(cin: int, cout: int, stride: int) -> nn.Sequential:
@@ -64,10 +69,12 @@ class CountingPerception(nn.Module):
 
     ``widths``: channels at strides 2, 4, 8, 16 (the deepest sees ~100 px of the 112-px input: the
     whole of the largest object). ``detail``: channels of the full-resolution path (0: none; with it the
-    input is 2 × ``image_size``). Votes are in output cells, relative to the cell's centre."""
+    input is 2 × ``image_size``). ``backbone="efficientnet_lite0"``: the encoder is EfficientNet-Lite0's
+    (``imagenet_backbone``; ``load_imagenet`` gives it ImageNet weights) reading the full render, and
+    ``widths`` are the decoder's (the fourth unused). Votes are in output cells, relative to the cell's centre."""
 
     def __init__(self, num_classes: int, widths=(32, 48, 96, 128), image_size: int = 112, counting: dict | None = None,
-                 detail: int = 0):
+                 detail: int = 0, backbone: str = "unet"):
         super().__init__()
         unknown = set(counting or {}) - set(vote_counting.DEFAULT_COUNTING)
         if unknown:
@@ -79,19 +86,29 @@ class CountingPerception(nn.Module):
             raise ValueError(f"image_size must be a multiple of 16, got {image_size}")
         if detail < 0:
             raise ValueError(f"detail must be ≥ 0 channels (0: no full-resolution path), got {detail}")
+        if backbone not in BACKBONES:
+            raise ValueError(f"unknown backbone {backbone!r}; known: {list(BACKBONES)}")
+        if detail and backbone != "unet":
+            raise ValueError(f"backbone={backbone} reads the full render already: set detail=0 (got {detail})")
         self.num_classes = int(num_classes)
         self.widths = tuple(int(w) for w in widths)
         self.image_size = int(image_size)
+        self.backbone = backbone
         w1, w2, w3, w4 = self.widths
-        self.down = nn.ModuleList([_block(3, w1, 2), _block(w1, w2, 2), _block(w2, w3, 2), _block(w3, w4, 2)])
+        if backbone == "unet":
+            self.down = nn.ModuleList([_block(3, w1, 2), _block(w1, w2, 2), _block(w2, w3, 2), _block(w3, w4, 2)])
+            c1, c2, c3, c4 = self.widths
+        else:
+            self.encoder = EfficientLiteEncoder()
+            c1, c2, c3, c4 = EfficientLiteEncoder.channels
         self.detail_width = int(detail)
         if detail:
             self.detail = nn.Sequential(_block(3, detail, 2), _block(detail, w1, 2), nn.Conv2d(w1, w1, 1))
             nn.init.zeros_(self.detail[-1].weight)
             nn.init.zeros_(self.detail[-1].bias)
-        self.up3 = _block(w4 + w3, w3, 1)
-        self.up2 = _block(w3 + w2, w2, 1)
-        self.up1 = _block(w2 + w1, w1, 1)
+        self.up3 = _block(c4 + c3, w3, 1)
+        self.up2 = _block(w3 + c2, w2, 1)
+        self.up1 = _block(w2 + c1, w1, 1)
         self.classes = nn.Conv2d(w1, self.num_classes, 1)
         self.votes = nn.Conv2d(w1, 2, 1)
         self.density = nn.Conv2d(w1, 1, 1)
@@ -103,14 +120,23 @@ class CountingPerception(nn.Module):
 
     @property
     def input_size(self) -> int:
-        return input_size(self.image_size, self.detail_width)
+        return input_size(self.image_size, self.detail_width, self.backbone)
 
     @property
     def cell_px(self) -> float:
         """Pixels of the 224-px render one output cell covers (16 at 112 px in, 56 out)."""
         return (RENDER_SIZE / self.out_size) ** 2
 
-    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    def load_imagenet(self) -> None:
+        """Start the EfficientNet-Lite0 encoder from ImageNet (the ablation's other arm starts from scratch)."""
+        if self.backbone == "unet":
+            raise ValueError("ImageNet weights exist for backbone=efficientnet_lite0 only (this perception is a unet)")
+        self.encoder.load_imagenet()
+
+    def encode(self, x: torch.Tensor) -> list[torch.Tensor]:
+        """Standardised rgb → the encoder's four maps, finest (the output's cells) first."""
+        if self.backbone != "unet":
+            return self.encoder(x)
         if self.detail_width:          # the main path reads the render at image_size, the detail path in full
             small = F.interpolate(x, size=(self.image_size, self.image_size), mode="bilinear", align_corners=False,
                                   antialias=True)
@@ -121,7 +147,10 @@ class CountingPerception(nn.Module):
         for stage in self.down[1:]:
             x = stage(x)
             skips.append(x)
-        s1, s2, s3, x = skips
+        return skips
+
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        s1, s2, s3, x = self.encode(x)
         for up, skip in ((self.up3, s3), (self.up2, s2), (self.up1, s1)):
             x = F.interpolate(x, size=skip.shape[-2:], mode="bilinear", align_corners=False)
             x = up(torch.cat([x, skip], 1))
@@ -145,7 +174,7 @@ class CountingPerception(nn.Module):
 
     def config(self) -> dict:
         return {"num_classes": self.num_classes, "widths": list(self.widths), "image_size": self.image_size,
-                "counting": dict(self.counting), "detail": self.detail_width}
+                "counting": dict(self.counting), "detail": self.detail_width, "backbone": self.backbone}
 
 
 def save_perception(model: CountingPerception, path: str | Path, meta: dict) -> Path:

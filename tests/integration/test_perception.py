@@ -175,6 +175,10 @@ def test_frames_perception_and_counting_vqa_recipes_end_to_end(small_dataset, sp
              "train.eval_interval=2", "checkpoint.interval_steps=2", "train.val_fraction=0.4", "train.warmup_steps=1"]
     with pytest.raises(ValueError, match="size=224"):                 # the detail path needs full-size frames
         train.train(compose_recipe_config("train_perception", [*targs, "train.steps=2", "model.detail=4"]))
+    with pytest.raises(ValueError, match="size=224"):                 # so does the ImageNet backbone
+        train.train(compose_recipe_config("train_perception", [*targs, "train.steps=2", "model.backbone=efficientnet_lite0"]))
+    with pytest.raises(ValueError, match="model.backbone=efficientnet_lite0"):
+        train.train(compose_recipe_config("train_perception", [*targs, "train.steps=2", "model.imagenet=true"]))
     assert not (out / "checkpoints").exists()
     first = train.train(compose_recipe_config("train_perception", [*targs, "train.steps=2"]))
     assert first["steps"] == 2 and (out / "perception.pt").exists()
@@ -244,3 +248,28 @@ def test_the_detail_path_reads_the_full_render_and_warm_starts_from_a_file_witho
     assert loaded.detail_width == 4 and torch.equal(loaded.predict(rgb)[2], detail.predict(rgb)[2])
     with pytest.raises(ValueError, match="detail"):
         CountingPerception(K, detail=-1)
+
+
+def test_the_imagenet_backbone_loads_the_wheels_weights_and_round_trips(tmp_path):
+    from mqa_rl.modules.imagenet_backbone import imagenet_weights_path
+    torch.manual_seed(0)
+    scratch = CountingPerception(K, widths=(8, 8, 16, 16), backbone="efficientnet_lite0")
+    assert scratch.input_size == 224 and scratch.out_size == 56 and scratch.cell_px == 16.0
+    pretrained = CountingPerception(K, widths=(8, 8, 16, 16), backbone="efficientnet_lite0")
+    pretrained.load_imagenet()
+    blob = torch.load(imagenet_weights_path(), map_location="cpu", weights_only=True)
+    assert torch.equal(pretrained.encoder.stem[0].weight, blob["_conv_stem.weight"])
+    assert torch.equal(pretrained.encoder.blocks[14]._project_conv.weight, blob["_blocks.14._project_conv.weight"])
+    assert not torch.equal(scratch.encoder.stem[0].weight, blob["_conv_stem.weight"])
+    pretrained.eval()
+    rgb = torch.randint(0, 255, (2, 3, 224, 224), dtype=torch.uint8)
+    probs, votes, density = pretrained.predict(rgb)
+    assert probs.shape == (2, K, 56, 56) and votes.shape == (2, 2, 56, 56) and (density >= 0).all()
+    loaded, _ = load_perception(save_perception(pretrained, tmp_path / "p.pt", {}))
+    assert loaded.backbone == "efficientnet_lite0" and torch.equal(loaded.predict(rgb)[2], density)
+    with pytest.raises(ValueError, match="detail=0"):
+        CountingPerception(K, backbone="efficientnet_lite0", detail=4)
+    with pytest.raises(ValueError, match="unknown backbone"):
+        CountingPerception(K, backbone="resnet")
+    with pytest.raises(ValueError, match="efficientnet_lite0 only"):
+        CountingPerception(K).load_imagenet()
