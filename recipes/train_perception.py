@@ -38,8 +38,8 @@ from mqa_rl.files import load_versioned, write_atomic
 from mqa_rl.losses.perception import PerceptionLoss, countable_counts
 from mqa_rl.modules import vote_counting
 from mqa_rl.data.dataset import LEVELS
-from mqa_rl.modules.perception import (BACKBONES, PERCEPTION_FORMAT, PERCEPTION_VERSION, CountingPerception, input_size,
-                                       load_perception, save_perception)
+from mqa_rl.modules.perception import (PERCEPTION_FORMAT, PERCEPTION_VERSION, CountingPerception, check_backbone,
+                                       input_size, load_perception, save_perception)
 from mqa_rl.modules.vqa_encoder import standardise
 from mqa_rl.training.model_checkpoint import ModelCheckpoint
 from mqa_rl.training.resume_guard import RESUMABLE, refuse_changed_config
@@ -63,10 +63,7 @@ def check_config(cfg: DictConfig) -> None:
         raise ValueError(f"train.val_fraction={t.val_fraction} must lie in (0, 1): the checkpoint is chosen on held-out scenes")
     if t.lr <= 0 or t.warmup_steps < 0:
         raise ValueError(f"train.lr ({t.lr}) must be > 0 and train.warmup_steps ({t.warmup_steps}) ≥ 0")
-    if cfg.model.backbone not in BACKBONES:
-        raise ValueError(f"model.backbone={cfg.model.backbone!r} is not one of {list(BACKBONES)}")
-    if cfg.model.imagenet and cfg.model.backbone == "unet":
-        raise ValueError("model.imagenet=true needs model.backbone=efficientnet_lite0 (ImageNet weights exist for it only)")
+    check_backbone(cfg.model.backbone, cfg.model.detail, cfg.model.imagenet)      # before any frame is loaded
     for store in cfg.frames.stores:
         read_meta(store)                     # FileNotFoundError naming the recipe that collects it
 
@@ -145,7 +142,8 @@ def init_weights(model: CountingPerception, path: str) -> None:
                           hint="name a perception.pt of recipes/train_perception.py")
     missing, unexpected = model.load_state_dict(blob["state_dict"], strict=False)
     if unexpected or any(not k.startswith(("density.", "detail.")) for k in missing):
-        raise ValueError(f"init_from={path} does not fit model.widths={list(model.widths)}, model.detail={model.detail_width} "
+        raise ValueError(f"init_from={path} does not fit model.widths={list(model.widths)}, model.detail={model.detail_width}, "
+                         f"model.backbone={model.backbone} "
                          f"(missing {missing[:4]}, unexpected {unexpected[:4]}): match the architecture it was trained with")
     print(f"started from {path} (new heads: {sorted({k.split('.')[0] for k in missing}) or 'none'})")
 

@@ -21,7 +21,6 @@ from torch import nn
 # blocks of Lite0 the encoder keeps: index of the last block at strides 2, 4, 8, 16, 32
 # (block 15, the 320-channel one, and the classifier head are dropped)
 LAST_BLOCK = (0, 2, 4, 10, 14)
-CHANNELS = (16 + 24, 40, 112, 192)        # at the output resolution and each stride-2 step below it
 
 
 def _lite0():
@@ -44,9 +43,9 @@ def imagenet_weights_path() -> str:
 
 
 class EfficientLiteEncoder(nn.Module):
-    """Standardised rgb [B, 3, S, S] → [maps at S/4, S/8, S/16, S/32] with ``CHANNELS`` channels."""
+    """Standardised rgb [B, 3, S, S] → [maps at S/4, S/8, S/16, S/32] with ``channels`` channels."""
 
-    channels = CHANNELS
+    channels = (16 + 24, 40, 112, 192)        # at the output resolution and each stride-2 step below it
 
     def __init__(self):
         super().__init__()

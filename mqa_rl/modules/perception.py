@@ -57,6 +57,18 @@ def input_size(image_size: int, detail: int, backbone: str = "unet") -> int:
     return int(image_size) * (2 if detail or backbone != "unet" else 1)
 
 
+def check_backbone(backbone: str, detail: int = 0, imagenet: bool = False) -> None:
+    """ValueError unless ``backbone`` is known, reads the full render without the detail path, and (``imagenet``)
+    has ImageNet weights; the recipe calls it before loading frames, the model when built."""
+    if backbone not in BACKBONES:
+        raise ValueError(f"unknown backbone {backbone!r}; known: {list(BACKBONES)}")
+    if detail and backbone != "unet":
+        raise ValueError(f"backbone={backbone} reads the full render already: set detail=0 (got {detail})")
+    if imagenet and backbone == "unet":
+        raise ValueError("imagenet=true: ImageNet weights exist for model.backbone=efficientnet_lite0 only "
+                         "(this perception is a unet)")
+
+
 def _block(cin: int, cout: int, stride: int) -> nn.Sequential:
     return nn.Sequential(nn.Conv2d(cin, cout, 3, stride=stride, padding=1, bias=False), nn.BatchNorm2d(cout),
                          nn.ReLU(inplace=True),
@@ -86,10 +98,7 @@ class CountingPerception(nn.Module):
             raise ValueError(f"image_size must be a multiple of 16, got {image_size}")
         if detail < 0:
             raise ValueError(f"detail must be ≥ 0 channels (0: no full-resolution path), got {detail}")
-        if backbone not in BACKBONES:
-            raise ValueError(f"unknown backbone {backbone!r}; known: {list(BACKBONES)}")
-        if detail and backbone != "unet":
-            raise ValueError(f"backbone={backbone} reads the full render already: set detail=0 (got {detail})")
+        check_backbone(backbone, detail)
         self.num_classes = int(num_classes)
         self.widths = tuple(int(w) for w in widths)
         self.image_size = int(image_size)
@@ -129,8 +138,7 @@ class CountingPerception(nn.Module):
 
     def load_imagenet(self) -> None:
         """Start the EfficientNet-Lite0 encoder from ImageNet (the ablation's other arm starts from scratch)."""
-        if self.backbone == "unet":
-            raise ValueError("ImageNet weights exist for backbone=efficientnet_lite0 only (this perception is a unet)")
+        check_backbone(self.backbone, imagenet=True)
         self.encoder.load_imagenet()
 
     def encode(self, x: torch.Tensor) -> list[torch.Tensor]:
