@@ -10,7 +10,8 @@ each feature's maximum over the two frames instead. Objects do not vanish betwee
 either frame shows is evidence: a push that uncovers one target and buries another leaves I_stop's
 visible count where I_start's was, while the targets seen in either frame rise (docs/results.md "Reading both
 frames": a perfect counter on either frame gains 0.06-0.09 over I_stop for the learned student; the
-max-fused VQA did not, at one seed). A weighted mean cannot take a maximum.
+max-fused VQA did not, at one seed). A weighted mean cannot take a maximum. ``"last"`` reads I_stop alone
+(the ablation that asks what the first frame adds).
 
 Frame vector (``pool``):
 
@@ -67,7 +68,7 @@ VQA_FORMAT = "mqa_rl.vqa"
 VQA_VERSION = 1
 CHECKPOINT_NAME = "vqa.pt"          # what recipes/train_vqa.py writes into its out_dir
 POOLS = ("eqa", "classes", "counts")
-FUSIONS = ("attention", "max")
+FUSIONS = ("attention", "max", "last")
 TRAIN_HINT = "train one with `python recipes/train_vqa.py system=<name>` (it writes <out_dir>/vqa.pt)"
 
 
@@ -202,7 +203,8 @@ class VQAModel(nn.Module):
 
     def forward_features(self, question: torch.Tensor, first: torch.Tensor, last: torch.Tensor):
         """(logits [B, A], attention [B, 2]) from tokens [B, L] and encoder features [B, C, h, w] of both frames.
-        With ``frame_fusion="max"`` the "attention" is the share of features each frame supplies (ties halved)."""
+        With ``frame_fusion="max"`` the "attention" is the share of features each frame supplies (ties halved);
+        with ``"last"`` it is all on I_stop."""
         q = self.question(question)                                              # [B, D]
         frames = torch.stack([first, last], 1)                                   # [B, 2, C, h, w]
         b, t = frames.shape[:2]
@@ -215,6 +217,8 @@ class VQAModel(nn.Module):
         if self.config["frame_fusion"] == "max":
             last = ((v[:, 1] > v[:, 0]).float() + 0.5 * (v[:, 1] == v[:, 0]).float()).mean(-1)   # ties split evenly
             return self.classifier(q * v.amax(1)), torch.stack([1 - last, last], -1)
+        if self.config["frame_fusion"] == "last":
+            return self.classifier(q * v[:, 1]), torch.tensor([0.0, 1.0], device=v.device).expand(b, 2)
         joint = torch.cat([self.ques_tr(q).unsqueeze(1).expand(-1, t, -1), self.img_tr(v)], -1)
         attention = F.softmax(self.att(joint).squeeze(-1), dim=1)                # [B, 2]
         attended = (attention.unsqueeze(-1) * v).sum(1)

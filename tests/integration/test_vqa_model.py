@@ -75,6 +75,19 @@ def test_max_frame_fusion_takes_each_features_larger_value_and_round_trips(tmp_p
         VQAModel(VOCAB, ANSWERS, frame_fusion="sum")
 
 
+def test_last_frame_fusion_reads_i_stop_alone():
+    """frame_fusion="last" (the I_stop-only ablation): the answer does not move with I_start."""
+    torch.manual_seed(0)
+    model = VQAModel(VOCAB, ANSWERS, pool="eqa", frame_fusion="last").eval()
+    q, first, last = _batch(model)
+    f, l = model.encode_frames(first), model.encode_frames(last)
+    with torch.no_grad():
+        logits, attention = model.forward_features(q, f, l)
+        assert torch.allclose(logits, model.forward_features(q, l, l)[0], atol=1e-7)
+        assert not torch.allclose(logits, model.forward_features(q, l, f)[0], atol=1e-5)   # I_stop moves it
+    assert torch.equal(attention, torch.tensor([[0.0, 1.0]] * 3))
+
+
 def test_answer_probs_contract_and_round_trip(tmp_path):
     torch.manual_seed(0)
     model = VQAModel(VOCAB, ANSWERS, pool="classes")
