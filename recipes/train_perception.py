@@ -45,9 +45,9 @@ from mqa_rl.training.model_checkpoint import ModelCheckpoint
 from mqa_rl.training.resume_guard import RESUMABLE, refuse_changed_config
 from mqa_rl.training.run_dir import RunLock, positive_ints, refuse_unresumable
 from mqa_rl.training.run_logger import RunLogger, trim_scalars
-from mqa_rl.training.frame_augment import copy_paste, dihedral_pair
 from mqa_rl.training.signals import exit_on_sigterm
 from mqa_rl.training.vqa_data import scene_split
+from mqa_rl.transforms.dihedral import DIHEDRAL, dihedral
 
 PERCEPTION_FILE = "perception.pt"
 # the counting settings tried on held-out pretraining scenes (vote_counting.DEFAULT_COUNTING: what they mean)
@@ -61,9 +61,6 @@ def check_config(cfg: DictConfig) -> None:
     positive_ints(cfg, "train.steps", "train.batch_size", "train.eval_interval", "checkpoint.interval_steps")
     if not 0.0 < t.val_fraction < 1.0:
         raise ValueError(f"train.val_fraction={t.val_fraction} must lie in (0, 1): the checkpoint is chosen on held-out scenes")
-    if not 0.0 <= t.copy_paste.prob <= 1.0 or t.copy_paste.max_objects < 1:
-        raise ValueError(f"train.copy_paste.prob={t.copy_paste.prob} must lie in [0, 1] (0: off) and "
-                         f"train.copy_paste.max_objects={t.copy_paste.max_objects} be ≥ 1")
     if t.lr <= 0 or t.warmup_steps < 0:
         raise ValueError(f"train.lr ({t.lr}) must be > 0 and train.warmup_steps ({t.warmup_steps}) ≥ 0")
     check_backbone(cfg.model.backbone, cfg.model.detail, cfg.model.imagenet)      # before any frame is loaded
@@ -143,15 +140,22 @@ def init_weights(model: CountingPerception, path: str) -> None:
     """Start from a perception file's weights (same architecture); heads it lacks keep their initialisation."""
     blob = load_versioned(path, PERCEPTION_FORMAT, PERCEPTION_VERSION, what="perception file (init_from)",
                           hint="name a perception.pt of recipes/train_perception.py")
-    mine = model.state_dict()
-    state = {k: v for k, v in blob["state_dict"].items()           # a shared density where the model has a map per class
-             if not (k.startswith("density.") and k in mine and mine[k].shape != v.shape)}
-    missing, unexpected = model.load_state_dict(state, strict=False)
+    missing, unexpected = model.load_state_dict(blob["state_dict"], strict=False)
     if unexpected or any(not k.startswith(("density.", "detail.")) for k in missing):
         raise ValueError(f"init_from={path} does not fit model.widths={list(model.widths)}, model.detail={model.detail_width}, "
                          f"model.backbone={model.backbone} "
                          f"(missing {missing[:4]}, unexpected {unexpected[:4]}): match the architecture it was trained with")
     print(f"started from {path} (new heads: {sorted({k.split('.')[0] for k in missing}) or 'none'})")
+
+
+def augment(rgb: torch.Tensor, omap: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """The same random dihedral transform of a frame's rgb and object map (the bin seen from above is symmetric)."""
+    k = torch.randint(DIHEDRAL, (rgb.shape[0],))
+    rgb, omap = rgb.clone(), omap.clone()
+    for t in k.unique().tolist():
+        rgb[k == t] = dihedral(rgb[k == t], t)
+        omap[k == t] = dihedral(omap[k == t], t)
+    return rgb, omap
 
 
 def train(cfg: DictConfig) -> dict:
@@ -204,8 +208,7 @@ def _train(cfg: DictConfig, out: Path) -> dict:
         return calibrate_file(out / PERCEPTION_FILE, val, device)
 
     model = CountingPerception(num_classes, tuple(cfg.model.widths), int(cfg.model.image_size),
-                               detail=int(cfg.model.detail), backbone=cfg.model.backbone,
-                               class_density=bool(cfg.model.class_density))
+                               detail=int(cfg.model.detail), backbone=cfg.model.backbone)
     if cfg.model.imagenet:
         model.load_imagenet()
     model.to(device)
@@ -244,13 +247,11 @@ def _train(cfg: DictConfig, out: Path) -> dict:
         while state["step"] < steps:
             t0 = time.perf_counter()
             idx = torch.randint(n_train, (cfg.train.batch_size,))
-            rgb, omap, cls, vis = rgb_all[idx], omap_all[idx], cls_all[idx], vis_all[idx]
-            if cfg.train.copy_paste.prob:
-                rgb, omap, cls, vis = copy_paste(rgb, omap, cls, vis, prob=cfg.train.copy_paste.prob,
-                                                 max_objects=cfg.train.copy_paste.max_objects)
+            rgb, omap = rgb_all[idx], omap_all[idx]
             if cfg.train.augment:
-                rgb, omap = dihedral_pair(rgb, omap)
-            batch = {keys.OBJECT_MAP: omap.to(device), keys.OBJECT_CLASSES: cls.to(device), keys.FRAME_VISIBLE: vis.to(device)}
+                rgb, omap = augment(rgb, omap)
+            batch = {keys.OBJECT_MAP: omap.to(device), keys.OBJECT_CLASSES: cls_all[idx].to(device),
+                     keys.FRAME_VISIBLE: vis_all[idx].to(device)}
             td = loss(TensorDict(batch, batch_size=[len(idx)]), standardise(rgb.to(device), model.input_size))
             optim.zero_grad()
             loss.total(td).backward()

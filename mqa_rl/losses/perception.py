@@ -5,7 +5,7 @@
 * votes: for every cell showing an object, the offset from the cell to the centre of the visible
   pixels of the object covering most of it, weighted by that share (smooth L1, in cells), as Panoptic-DeepLab regresses instance centres;
 * density: every countable object (≥ 20 visible px in the render) spreads a unit mass over its visible
-  cells (in its class's map when the perception has a map per class) (squared error summed over an image's cells), and each class's count read from it (density ×
+  cells (squared error summed over an image's cells), and each class's count read from it (density ×
   class probability, summed) meets the perfect counter's count of that class (smooth L1): the
   measured quantity itself is a loss term.
 """
@@ -19,7 +19,6 @@ from torch import nn
 
 from mqa_rl import keys
 from mqa_rl.envs.sapien_bin import MAX_OBJECTS
-from mqa_rl.modules.vote_counting import expected_counts
 from mqa_rl.transforms.episode_stats import COUNTABLE_PX
 
 
@@ -33,8 +32,8 @@ def countable_counts(visible_area: torch.Tensor, object_classes: torch.Tensor, n
 def perception_targets(object_map: torch.Tensor, object_classes: torch.Tensor, visible_area: torch.Tensor,
                        num_classes: int, out_size: int):
     """(class fractions [B, K, s, s], offsets [B, 2, s, s], vote weight [B, s, s]: the share of the
-    cell its main object covers, density [B, K, s, s]: each class's countable objects' unit masses over
-    their cells; summed over classes, the shared density) from object maps uint8 [B, S, S] (0 = bin, 1 + slot), slot classes int64 [B, 50] and visible
+    cell its main object covers, density [B, 1, s, s]: the countable objects' unit masses over their
+    cells) from object maps uint8 [B, S, S] (0 = bin, 1 + slot), slot classes int64 [B, 50] and visible
     render areas [B, 50]."""
     b, size = object_map.shape[0], object_map.shape[-1]
     pool = size // out_size
@@ -57,7 +56,7 @@ def perception_targets(object_map: torch.Tensor, object_classes: torch.Tensor, v
     weight = share                                                                    # 0 where no object shows
     countable = torch.cat([torch.zeros_like(visible_area[:, :1]), visible_area], 1) >= COUNTABLE_PX   # [B, 51]
     unit = countable.float() * pool * pool / area.clamp_min(1.0)                      # mass per cell it fills
-    density = torch.einsum("bnyx,bn,bnk->bkyx", slot_frac, unit, cls_onehot)          # a map per class
+    density = torch.einsum("bnyx,bn->byx", slot_frac, unit).unsqueeze(1)
     return class_frac, torch.stack([ty, tx], 1), weight, density
 
 
@@ -80,10 +79,8 @@ class PerceptionLoss(nn.Module):
         loss_class = -(frac * F.log_softmax(logits, 1)).sum(1).mean()
         vote_err = F.smooth_l1_loss(votes, offsets, reduction="none").sum(1)
         loss_votes = (vote_err * weight).sum() / weight.sum().clamp_min(1.0)
-        if density.shape[1] == 1:
-            target = target.sum(1, keepdim=True)
         loss_map = (density - target).square().flatten(1).sum(1).mean()
-        expected = expected_counts(logits.softmax(1), density)                              # [B, K-1]
+        expected = (logits.softmax(1)[:, 1:] * density).flatten(2).sum(-1)                  # [B, K-1]
         count_err = F.smooth_l1_loss(expected, countable_counts(visible, classes, self.model.num_classes),
                                      reduction="none")
         loss_count = count_err.sum(1).mean()

@@ -5,8 +5,7 @@
                                → class logits [B, K, 56, 56]   (K = 1 + dataset classes; 0 = bin)
                                → centre votes  [B, 2, 56, 56]   (offset of each cell to its object's centre)
                                → density       [B, 1, 56, 56]   (each countable object's unit mass, spread
-                                                                 over its visible cells; [B, K, 56, 56], one
-                                                                 map per class, with ``class_density``)
+                                                                 over its visible cells)
 
 With ``detail`` > 0 a second path reads the full 2 × ``image_size`` render through two stride-2 stages and
 adds what it sees to the first stage's 56 × 56 map (small targets are 5-25 px at 112 px, 20-100 px in the
@@ -32,7 +31,6 @@ what it was trained on; ``recipes/train_perception.py`` writes it.
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import torch
@@ -79,7 +77,7 @@ def _block(cin: int, cout: int, stride: int) -> nn.Sequential:
 
 class CountingPerception(nn.Module):
     """Standardised rgb [B, 3, S, S] → (class logits [B, K, S/2, S/2], votes [B, 2, S/2, S/2],
-    density [B, 1 or K, S/2, S/2] ≥ 0).
+    density [B, 1, S/2, S/2] ≥ 0).
 
     ``widths``: channels at strides 2, 4, 8, 16 (the deepest sees ~100 px of the 112-px input: the
     whole of the largest object). ``detail``: channels of the full-resolution path (0: none; with it the
@@ -88,7 +86,7 @@ class CountingPerception(nn.Module):
     ``widths`` are the decoder's (the fourth unused). Votes are in output cells, relative to the cell's centre."""
 
     def __init__(self, num_classes: int, widths=(32, 48, 96, 128), image_size: int = 112, counting: dict | None = None,
-                 detail: int = 0, backbone: str = "unet", class_density: bool = False):
+                 detail: int = 0, backbone: str = "unet"):
         super().__init__()
         unknown = set(counting or {}) - set(vote_counting.DEFAULT_COUNTING)
         if unknown:
@@ -122,9 +120,8 @@ class CountingPerception(nn.Module):
         self.up1 = _block(w2 + c1, w1, 1)
         self.classes = nn.Conv2d(w1, self.num_classes, 1)
         self.votes = nn.Conv2d(w1, 2, 1)
-        self.class_density = bool(class_density)
-        self.density = nn.Conv2d(w1, self.num_classes if class_density else 1, 1)
-        nn.init.constant_(self.density.bias, DENSITY_BIAS - (math.log(self.num_classes) if class_density else 0.0))
+        self.density = nn.Conv2d(w1, 1, 1)
+        nn.init.constant_(self.density.bias, DENSITY_BIAS)
 
     @property
     def out_size(self) -> int:
@@ -185,8 +182,7 @@ class CountingPerception(nn.Module):
 
     def config(self) -> dict:
         return {"num_classes": self.num_classes, "widths": list(self.widths), "image_size": self.image_size,
-                "counting": dict(self.counting), "detail": self.detail_width, "backbone": self.backbone,
-                "class_density": self.class_density}
+                "counting": dict(self.counting), "detail": self.detail_width, "backbone": self.backbone}
 
 
 def save_perception(model: CountingPerception, path: str | Path, meta: dict) -> Path:

@@ -78,10 +78,7 @@ def clusters(probs: torch.Tensor, votes: torch.Tensor, cell_px: float, *, radius
 
 
 def expected_counts(probs: torch.Tensor, density: torch.Tensor) -> torch.Tensor:
-    """float [B, K-1]: the density's mass of each class (1 … K-1): Σ over cells of density × class probability,
-    or, for a density with a map per class [B, K, s, s], the sum of that class's map."""
-    if density.shape[1] > 1:
-        return density[:, 1:].flatten(2).sum(-1)
+    """float [B, K-1]: the density's mass of each class (1 … K-1): Σ over cells of density × class probability."""
     return (probs[:, 1:] * density).flatten(2).sum(-1)
 
 
