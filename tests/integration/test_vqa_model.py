@@ -23,6 +23,12 @@ def _batch(model, b=3, size=224):
     return q, first, last
 
 
+def _encoded(model):
+    """(tokens, I_start features, I_stop features) of ``_batch``."""
+    q, first, last = _batch(model)
+    return q, model.encode_frames(first), model.encode_frames(last)
+
+
 @pytest.mark.parametrize("pool", ["eqa", "classes"])
 @pytest.mark.parametrize("frozen", [True, False])
 def test_forward_backward_and_attention_over_two_frames(pool, frozen):
@@ -56,8 +62,7 @@ def test_max_frame_fusion_takes_each_features_larger_value_and_round_trips(tmp_p
     asked class cannot be averaged away; the reported shares sum to 1; the option survives save/load."""
     torch.manual_seed(0)
     model = VQAModel(VOCAB, ANSWERS, pool="classes", frame_fusion="max").eval()
-    q, first, last = _batch(model)
-    f, l = model.encode_frames(first), model.encode_frames(last)
+    q, f, l = _encoded(model)
     with torch.no_grad():
         logits, share = model.forward_features(q, f, l)
         qv = model.question(q)
@@ -79,8 +84,7 @@ def test_last_frame_fusion_reads_i_stop_alone():
     """frame_fusion="last" (the I_stop-only ablation): the answer does not move with I_start."""
     torch.manual_seed(0)
     model = VQAModel(VOCAB, ANSWERS, pool="eqa", frame_fusion="last").eval()
-    q, first, last = _batch(model)
-    f, l = model.encode_frames(first), model.encode_frames(last)
+    q, f, l = _encoded(model)
     with torch.no_grad():
         logits, attention = model.forward_features(q, f, l)
         assert torch.allclose(logits, model.forward_features(q, l, l)[0], atol=1e-7)
