@@ -4,6 +4,8 @@
     python recipes/train_vqa.py system=random vqa=counting           # the counting perception under the paper's head
     python recipes/train_vqa.py system=random resume=true           # continue a killed run
     python recipes/train_vqa.py system=random encoder.freeze=false device=cuda   # fine-tune the encoder
+    python recipes/train_vqa.py system=random vqa=counting encoder.freeze=false \
+        init_from=checkpoints/vqa_counting/random train.lr=1e-4     # fine-tune a frozen head with its perception
 
 Reads ``${root}/rollouts/<questions>/<system>/train`` (recipes/collect_rollouts.py) and the pretrained
 encoder (recipes/pretrain_vqa_encoder.py); writes to ``out_dir``: ``vqa.pt`` (the model with the best
@@ -36,7 +38,7 @@ from mqa_rl.data import MQADataset
 from mqa_rl.data.dataset import LEVELS
 from mqa_rl.files import write_atomic
 from mqa_rl.losses.vqa import VQALoss
-from mqa_rl.modules.vqa import CHECKPOINT_NAME, VQAModel, grounding_module, save_vqa, vqa_module
+from mqa_rl.modules.vqa import CHECKPOINT_NAME, VQAModel, grounding_module, load_vqa, save_vqa, vqa_module
 from mqa_rl.modules.perception import load_perception
 from mqa_rl.modules.vqa_encoder import load_encoder
 from mqa_rl.training.model_checkpoint import ModelCheckpoint
@@ -70,13 +72,13 @@ def build_model(cfg: DictConfig, ds: MQADataset) -> tuple[VQAModel, dict]:
     """The VQA for ``ds``'s vocabularies with the pretrained encoder (if given) loaded; the encoder's
     architecture (channels, head width) is the file's."""
     options = {k: cfg.vqa[k] for k in MODEL_OPTIONS}
-    if cfg.vqa.pool == "counts":                      # the counting perception, frozen, in place of EQA's CNN
+    if cfg.vqa.pool == "counts":                      # the counting perception in place of EQA's CNN
         perception, perception_meta = load_perception(cfg.perception.weights)
         if perception.num_classes != 1 + len(ds.classes):
             raise ValueError(f"perception {cfg.perception.weights} knows {perception.num_classes - 1} classes, the dataset "
                              f"{len(ds.classes)}: train one on frames of this object library")
-        model = VQAModel(ds.vocab.itos, ds.answers, freeze_encoder=True, encoder_classes=1 + len(ds.classes),
-                         perception=perception.config(), **options)
+        model = VQAModel(ds.vocab.itos, ds.answers, freeze_encoder=bool(cfg.encoder.freeze),
+                         encoder_classes=1 + len(ds.classes), perception=perception.config(), **options)
         model.encoder.load_state_dict(perception.state_dict())
         kept = {k: perception_meta.get(k) for k in ("command", "frames", "step", "val", "train_seconds")}
         return model, {"perception": str(cfg.perception.weights), **kept}
@@ -98,6 +100,20 @@ def build_model(cfg: DictConfig, ds: MQADataset) -> tuple[VQAModel, dict]:
         warnings.warn("encoder.weights=null with encoder.freeze=true: the VQA reads a fixed random projection of the "
                       "images; pretrain one (recipes/pretrain_vqa_encoder.py) or set encoder.freeze=false", stacklevel=2)
     return model, encoder_meta
+
+
+def start_from(model: VQAModel, path: str) -> dict:
+    """Copy a trained VQA file's weights (head and encoder) into ``model``: a frozen head fine-tuned with its
+    encoder starts where it stood. Refuses a file of other vocabularies or another architecture."""
+    init = load_vqa(path)
+    differs = {k: (init.config.get(k), v) for k, v in model.config.items()
+               if k != "freeze_encoder" and init.config.get(k) != v}
+    if init.vocab != model.vocab or init.answers != model.answers or differs:
+        what = ", ".join(f"{k}: {a!r} there, {b!r} here" for k, (a, b) in differs.items()) or "the vocabularies"
+        raise ValueError(f"init_from={path} does not fit this VQA ({what}): start from a head trained with the "
+                         f"same vqa config and dataset, or set init_from=null")
+    model.load_state_dict(init.state_dict())
+    return {"init_from": str(path), "init_step": init.meta.get("step")}
 
 
 @torch.no_grad()
@@ -151,6 +167,8 @@ def _train(cfg: DictConfig, out: Path) -> dict:
     if meta["dataset"]["manifest_sha256"] != dataset_fingerprint(ds.root):
         raise ValueError(f"the rollouts {cfg.rollouts} were collected on another dataset than {cfg.dataset}")
     model, encoder_meta = build_model(cfg, ds)
+    if cfg.init_from:
+        encoder_meta.update(start_from(model, cfg.init_from))
     model.to(device)
 
     frozen = bool(cfg.encoder.freeze)

@@ -169,11 +169,15 @@ class CountingPerception(nn.Module):
         logits, votes, density = self(standardise(rgb, self.input_size))
         return logits.softmax(1), votes, density
 
-    def count_features(self, rgb: torch.Tensor) -> torch.Tensor:
+    def count_features(self, rgb: torch.Tensor, trainable: bool = False) -> torch.Tensor:
         """uint8 rgb [B, 3, H, W] → the VQA's per-class count features [B, K, F] (``vote_counting``), with
-        this perception's own counting settings."""
+        this perception's own counting settings; ``trainable``: with gradients (fine-tuning under the VQA)."""
+        if not trainable:
+            with torch.no_grad():
+                probs, votes, density = (t.float().cpu() for t in self.predict(rgb))
+                return vote_counting.count_features(probs, votes, density, self.cell_px, **self.counting)
         probs, votes, density = (t.float().cpu() for t in self.predict(rgb))
-        return vote_counting.count_features(probs, votes, density, self.cell_px, **self.counting)
+        return vote_counting.trainable_count_features(probs, votes, density, self.cell_px, **self.counting)
 
     def counts(self, rgb: torch.Tensor) -> torch.Tensor:
         """uint8 rgb [B, 3, H, W] → int64 [B, K-1]: the objects of each class (1 … K-1) it counts."""

@@ -18,7 +18,8 @@ cells of density × class probability, and the count rounds it up from ``round_a
 0 … ``MAX_COUNT``, the last bin meaning "that many or more"), the ``TOP`` largest cluster masses
 (log-scaled, so that a head can set its own threshold), the class's visible area and its expected count
 from the density; plus one image-wide entry (row 0), the number of counted objects of every class (how
-crowded the bin looks: a difficulty signal read from the image).
+crowded the bin looks: a difficulty signal read from the image). ``trainable_count_features`` gives the same
+numbers with gradients, so that the VQA's answer loss can fine-tune the perception under it.
 """
 
 from __future__ import annotations
@@ -121,6 +122,30 @@ def count_features(probs: torch.Tensor, votes: torch.Tensor, density: torch.Tens
     masses = clusters(probs, votes, cell_px, **cluster_settings)
     counted = read_counts(readout, expected, masses, min_px, round_at)
     return features_from_masses(masses, area, min_px, expected=expected, counted=counted)
+
+
+def trainable_count_features(probs: torch.Tensor, votes: torch.Tensor, density: torch.Tensor, cell_px: float, *,
+                             min_px: float = COUNTABLE_PX, round_at: float = DEFAULT_COUNTING["round_at"],
+                             **settings) -> torch.Tensor:
+    """``count_features`` in the forward pass, with straight-through gradients to the class probabilities and
+    the density: the count one-hot passes the gradient of a soft one-hot (linear between the two counts the
+    expected count lies between, on the density's rounding scale), the area and the expected count their own,
+    the image-wide entry that of the expected counts' sum. The vote-cluster masses pass none (clustering is
+    not differentiable). Equal to ``count_features`` in value, so a frozen head starts fine-tuning exactly."""
+    with torch.no_grad():
+        hard = count_features(probs.detach(), votes.detach(), density.detach(), cell_px, min_px=min_px,
+                              round_at=round_at, **settings)
+    area = probs[:, 1:].flatten(2).sum(-1) * cell_px
+    expected = expected_counts(probs, density)
+    position = (expected + 0.5 - round_at).clamp(0.0, float(MAX_COUNT))          # its rounding gives the count
+    bins = torch.arange(MAX_COUNT + 1, dtype=position.dtype, device=position.device)
+    soft_count = (1.0 - (position.unsqueeze(-1) - bins).abs()).clamp_min(0.0)    # [B, K-1, MAX_COUNT + 1]
+    b, k1 = expected.shape
+    per_class = torch.cat([soft_count, torch.zeros(b, k1, TOP, dtype=soft_count.dtype),
+                           torch.log1p(area / min_px).unsqueeze(-1), expected.unsqueeze(-1)], -1)
+    image_wide = F.pad((expected.sum(-1, keepdim=True) / 50.0).unsqueeze(1), (0, FEATURES - 1))
+    soft = torch.cat([image_wide, per_class], 1)
+    return hard + (soft - soft.detach())
 
 
 def features_from_masses(masses, area: torch.Tensor, min_px: float = COUNTABLE_PX, *,

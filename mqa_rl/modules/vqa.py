@@ -28,10 +28,11 @@ Frame vector (``pool``):
   [2·21, 24, 24] instead of the bottleneck [32, 10, 10].
 
 * ``"counts"`` (ours, ``vqa=counting``): the encoder is the counting perception
-  (``mqa_rl.modules.perception``, frozen), which reads per class how many objects show ≥ 20 px, its
-  largest vote clusters and its area (``vote_counting.count_features``); the question picks the class
+  (``mqa_rl.modules.perception``, frozen by default), which reads per class how many objects show ≥ 20 px,
+  its largest vote clusters and its area (``vote_counting.count_features``); the question picks the class
   (heads over the class channels, grounded) and an MLP reads what it picked plus how crowded the image
-  is (docs/perception.md).
+  is (docs/perception.md). ``freeze_encoder=False`` fine-tunes the perception through the same numbers
+  (``vote_counting.trainable_count_features``: straight-through gradients to its density and classes).
 
 Public contract (the web demo and ``recipes/evaluate.py`` use only this)::
 
@@ -152,9 +153,6 @@ class VQAModel(nn.Module):
         if (pool == "counts") != bool(perception):
             raise ValueError("pool='counts' reads the counting perception: give both (perception=<its config>, as "
                              "recipes/train_vqa.py does with vqa=counting), or neither")
-        if pool == "counts" and not freeze_encoder:
-            raise ValueError("the counting perception's vote clusters are not differentiable: the VQA keeps it frozen "
-                             "(freeze_encoder=true); train the perception itself with recipes/train_perception.py")
         self.encoder = CountingPerception(**perception) if perception else \
             FrameEncoder(tuple(encoder_channels), image_size, encoder_classes, encoder_head_width)
         self.pool = pool
@@ -183,7 +181,9 @@ class VQAModel(nn.Module):
 
     def train(self, mode: bool = True):
         super().train(mode)
-        if self.config["freeze_encoder"]:
+        if self.config["freeze_encoder"] or self.pool == "counts":
+            # a fine-tuned perception keeps its batch-norm statistics of the pretraining frames: the answers'
+            # batches hold a few hundred piles' first and last images
             self.encoder.eval()
         return self
 
@@ -194,7 +194,8 @@ class VQAModel(nn.Module):
         and object densities [..., 2K, 24, 24], for ``pool="counts"`` the perception's count features [..., K, F]."""
         batch = rgb.shape[:-3]
         if self.pool == "counts":
-            out = self.encoder.count_features(rgb.reshape(-1, *rgb.shape[-3:])).to(rgb.device)
+            trainable = not self.config["freeze_encoder"] and torch.is_grad_enabled()
+            out = self.encoder.count_features(rgb.reshape(-1, *rgb.shape[-3:]), trainable=trainable).to(rgb.device)
             return out.reshape(*batch, *out.shape[1:])
         if self.pool != "classes":
             return self.encoder.encode(rgb)

@@ -121,10 +121,28 @@ def test_counting_vqa_answers_through_the_public_contract_and_reloads(tmp_path):
     assert model.grounding_logits(tokens).shape == (1, 2, K)
     again = load_vqa(save_vqa(model, tmp_path / "vqa.pt"))
     assert torch.allclose(again.answer_probs(tokens, img, img), probs)
-    with pytest.raises(ValueError, match="not differentiable"):
-        VQAModel(vocab, ["0"], pool="counts", perception=perception.config(), freeze_encoder=False)
     with pytest.raises(ValueError, match="counting perception"):
         VQAModel(vocab, ["0"], pool="counts")
+
+
+def test_a_fine_tuned_counting_vqa_reads_the_frozen_numbers_and_sends_gradients_to_density_and_classes():
+    """Fine-tuning starts exactly where the frozen head stood (same features in value), and the answer loss
+    reaches the perception's density and class heads (straight through the count one-hot), not its votes."""
+    torch.manual_seed(0)
+    perception = CountingPerception(K, widths=(8, 8, 16, 16)).eval()
+    img = torch.randint(0, 255, (3, 3, 224, 224), dtype=torch.uint8)
+    frozen = perception.count_features(img)
+    features = perception.count_features(img, trainable=True)
+    assert torch.allclose(features, frozen, atol=1e-5) and features.requires_grad
+    (features[:, 1:, : vote_counting.MAX_COUNT + 1] * torch.randn(3, K - 1, vote_counting.MAX_COUNT + 1)).sum().backward()
+    assert perception.density.weight.grad.abs().sum() > 0 and perception.classes.weight.grad.abs().sum() > 0
+    assert perception.votes.weight.grad is None
+    vocab = ["<pad>", "<unk>", "how", "many", "cans", "?"]
+    model = VQAModel(vocab, ["0", "1"], pool="counts", cell_heads=2, perception=perception.config(), freeze_encoder=False)
+    model.train()
+    assert not model.encoder.training and all(p.requires_grad for p in model.encoder.parameters())   # BN statistics kept
+    with torch.no_grad():                                          # answering needs no gradients: the frozen numbers
+        assert model.encode_frames(img).requires_grad is False
 
 
 def _dataset(root, scenes):
@@ -205,6 +223,14 @@ def test_frames_perception_and_counting_vqa_recipes_end_to_end(small_dataset, sp
     q = small_dataset.questions[0]
     img = torch.zeros(1, 224, 224, 3, dtype=torch.uint8)
     assert model.answer_probs(model.tokenize([q.text]), img, img).shape == (1, len(small_dataset.answers))
+    tuned = train_vqa.train(compose_recipe_config("train_vqa", [          # fine-tune that head with its perception
+        *vargs[:-2], "train.steps=2", "encoder.freeze=false", f"init_from={summary['vqa']}", f"out_dir={tmp_path / 'ft'}"]))
+    tuned_model = load_vqa(tuned["vqa"])
+    assert not tuned_model.config["freeze_encoder"] and tuned_model.meta["encoder"]["init_from"] == summary["vqa"]
+    assert any(not torch.equal(tuned_model.encoder.state_dict()[k], v) for k, v in model.encoder.state_dict().items())
+    with pytest.raises(ValueError, match="does not fit this VQA"):   # a head of another architecture
+        train_vqa.train(compose_recipe_config("train_vqa", [*vargs, "vqa.dim=16", f"init_from={summary['vqa']}",
+                                                            f"out_dir={tmp_path / 'bad'}"]))
 
 
 @pytest.mark.parametrize("system", ["no_manipulation", "random", "dqn_student", "privileged", "dqn_countable"])
