@@ -107,12 +107,19 @@ def start_from(model: VQAModel, path: str) -> dict:
     encoder starts where it stood. Refuses a file of other vocabularies or another architecture."""
     init = load_vqa(path)
     differs = {k: (init.config.get(k), v) for k, v in model.config.items()
-               if k != "freeze_encoder" and init.config.get(k) != v}
+               if k not in ("freeze_encoder", "perception") and init.config.get(k) != v}
+    there, here = init.config.get("perception") or {}, model.config.get("perception") or {}
+    differs.update({f"perception.{k}": (there[k], here[k]) for k in there.keys() & here.keys() if there[k] != here[k]})
+    if bool(there) != bool(here):
+        differs["perception"] = (there or None, here or None)
+    hint = "start from a head trained with the same vqa config and dataset, or set init_from=null"
     if init.vocab != model.vocab or init.answers != model.answers or differs:
         what = ", ".join(f"{k}: {a!r} there, {b!r} here" for k, (a, b) in differs.items()) or "the vocabularies"
-        raise ValueError(f"init_from={path} does not fit this VQA ({what}): start from a head trained with the "
-                         f"same vqa config and dataset, or set init_from=null")
-    model.load_state_dict(init.state_dict())
+        raise ValueError(f"init_from={path} does not fit this VQA ({what}): {hint}")
+    try:                                               # settings an older file lacks are checked by its weights
+        model.load_state_dict(init.state_dict())
+    except RuntimeError as error:
+        raise ValueError(f"init_from={path} does not fit this VQA ({str(error)[:300]}): {hint}") from error
     return {"init_from": str(path), "init_step": init.meta.get("step")}
 
 
