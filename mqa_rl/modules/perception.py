@@ -172,12 +172,10 @@ class CountingPerception(nn.Module):
     def count_features(self, rgb: torch.Tensor, trainable: bool = False) -> torch.Tensor:
         """uint8 rgb [B, 3, H, W] → the VQA's per-class count features [B, K, F] (``vote_counting``), with
         this perception's own counting settings; ``trainable``: with gradients (fine-tuning under the VQA)."""
-        if not trainable:
-            with torch.no_grad():
-                probs, votes, density = (t.float().cpu() for t in self.predict(rgb))
-                return vote_counting.count_features(probs, votes, density, self.cell_px, **self.counting)
-        probs, votes, density = (t.float().cpu() for t in self.predict(rgb))
-        return vote_counting.trainable_count_features(probs, votes, density, self.cell_px, **self.counting)
+        with torch.set_grad_enabled(trainable and torch.is_grad_enabled()):
+            probs, votes, density = (t.float().cpu() for t in self.predict(rgb))
+            read = vote_counting.trainable_count_features if trainable else vote_counting.count_features
+            return read(probs, votes, density, self.cell_px, **self.counting)
 
     def counts(self, rgb: torch.Tensor) -> torch.Tensor:
         """uint8 rgb [B, 3, H, W] → int64 [B, K-1]: the objects of each class (1 … K-1) it counts."""
