@@ -49,6 +49,12 @@ def dihedral(x: torch.Tensor, index: int) -> torch.Tensor:
     return x.flip(-1) if index >= 4 else x
 
 
+def undo_dihedral(x: torch.Tensor, index: int) -> torch.Tensor:
+    """The inverse of ``dihedral(·, index)``: a map predicted on the transformed image, put back on the original."""
+    x = x.flip(-1) if index >= 4 else x
+    return torch.rot90(x, -(index % 4), dims=(-2, -1))
+
+
 def transform_push_map(q: torch.Tensor, k: int, mirror: bool) -> torch.Tensor:
     """Apply the symmetry to per-action values [..., 6273] (a Q vector, a mask)."""
     push = q[..., : actions.NUM_PUSHES].unflatten(-1, (actions.DIRECTIONS, actions.GRID, actions.GRID))
