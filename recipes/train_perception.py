@@ -9,8 +9,8 @@ Selects by the counting rule itself, on whole held-out pretraining scenes: the s
 in the scene) pairs whose count (vote clusters or density, whichever is better) equals the number of
 objects with ≥ 20 visible pixels; at the end it chooses the readout and its counting settings (vote
 radius, suppression window, probability floor, mass threshold; the density's rounding point) and whether
-the maps are averaged over the bin's 8 symmetries (``views``) on those scenes too and writes them into the file (``calibrate_only=true``: only
-that, for a run stopped early).
+the maps are averaged over the bin's 8 symmetries (``views``) on those scenes too and writes them into
+the file (``calibrate_only=true``: only that, for a run stopped early).
 Writes ``out_dir/perception.pt`` (the best; ``mqa_rl.modules.perception.load_perception``),
 ``checkpoints/`` (atomic, for resume=true), ``csv/`` + ``wandb/`` logs, ``config.yaml``, ``summary.json``.
 """
