@@ -109,6 +109,7 @@ def calibrate_counting(model: CountingPerception, frames, device) -> tuple[dict,
     pairs of ``frames`` (held-out pretraining scenes) right, and every setting's accuracy."""
     tried = []
     grid = CALIBRATION_GRID
+    kept = model.views
     for views in grid["views"]:
         model.views = views
         probs, votes, density = predictions(model, frames, device)
@@ -122,6 +123,7 @@ def calibrate_counting(model: CountingPerception, frames, device) -> tuple[dict,
         for round_at in grid["round_at"]:
             setting = {**model.counting, "readout": "density", "round_at": round_at, "views": views}
             tried.append({**setting, **accuracy_table(vote_counting.density_counts(expected, round_at), frames)})
+    model.views = kept
     best = max(tried, key=lambda r: r["val/count_accuracy"])
     return {k: best[k] for k in (*vote_counting.DEFAULT_COUNTING, "views")}, tried
 

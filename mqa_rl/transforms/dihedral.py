@@ -50,9 +50,9 @@ def dihedral(x: torch.Tensor, index: int) -> torch.Tensor:
 
 
 def undo_dihedral(x: torch.Tensor, index: int) -> torch.Tensor:
-    """The inverse of ``dihedral(·, index)``: a map predicted on the transformed image, put back on the original."""
-    x = x.flip(-1) if index >= 4 else x
-    return torch.rot90(x, -(index % 4), dims=(-2, -1))
+    """The inverse of ``dihedral(·, index)``: a map predicted on the transformed image, put back on the original
+    (unmirror, then turn back)."""
+    return transform_images(x, -(index % 4), index >= 4)
 
 
 def transform_push_map(q: torch.Tensor, k: int, mirror: bool) -> torch.Tensor:
