@@ -80,9 +80,9 @@ def main() -> None:
                      float(areas.min()) if len(areas) else float("nan")))
     t = torch.tensor(rows, dtype=torch.float64)
     report = {"perception": a.perception, "dataset": a.dataset, "split": a.split, "step": meta.get("step"),
-              "counting": model.counting, "views": model.views,
+              "counting": model.counting,
               "render_s": round(render_s, 1), "perceive_ms_per_image": round(1000 * perceive_s / len(order), 1), "levels": {}}
-    print(f"{a.perception} (step {meta.get('step')}, {model.views} view(s)) on {a.dataset} {a.split}: {len(order)} first images "
+    print(f"{a.perception} (step {meta.get('step')}) on {a.dataset} {a.split}: {len(order)} first images "
           f"({report['perceive_ms_per_image']} ms each), {len(rows)} COUNTING questions")
     for lv, level in enumerate(LEVELS):
         m = t[:, 0] == lv

@@ -8,9 +8,9 @@
 Selects by the counting rule itself, on whole held-out pretraining scenes: the share of (frame, class
 in the scene) pairs whose count (vote clusters or density, whichever is better) equals the number of
 objects with ≥ 20 visible pixels; at the end it chooses the readout and its counting settings (vote
-radius, suppression window, probability floor, mass threshold; the density's rounding point) and whether
-the maps are averaged over the bin's 8 symmetries (``views``) on those scenes too and writes them into
-the file (``calibrate_only=true``: only that, for a run stopped early).
+radius, suppression window, probability floor, mass threshold; the density's rounding point) on
+those scenes too and writes them into the file (``calibrate_only=true``: only
+that, for a run stopped early).
 Writes ``out_dir/perception.pt`` (the best; ``mqa_rl.modules.perception.load_perception``),
 ``checkpoints/`` (atomic, for resume=true), ``csv/`` + ``wandb/`` logs, ``config.yaml``, ``summary.json``.
 """
@@ -52,7 +52,7 @@ from mqa_rl.transforms.dihedral import DIHEDRAL, dihedral
 PERCEPTION_FILE = "perception.pt"
 # the counting settings tried on held-out pretraining scenes (vote_counting.DEFAULT_COUNTING: what they mean)
 CALIBRATION_GRID = {"radius": (2.5, 4.0), "nms": (5, 9), "min_prob": (0.05, 0.3), "min_px": (12, 16, 20, 28, 36),
-                    "round_at": (0.3, 0.4, 0.5, 0.6, 0.7), "views": (1, DIHEDRAL)}
+                    "round_at": (0.3, 0.4, 0.5, 0.6, 0.7)}
 COMMAND = "python recipes/train_perception.py"
 
 
@@ -107,25 +107,20 @@ def count_accuracy(model: CountingPerception, frames, device) -> dict[str, float
 def calibrate_counting(model: CountingPerception, frames, device) -> tuple[dict, list[dict]]:
     """The counting settings (``CALIBRATION_GRID``) under which the model counts the most (frame, class present)
     pairs of ``frames`` (held-out pretraining scenes) right, and every setting's accuracy."""
+    probs, votes, density = predictions(model, frames, device)
     tried = []
     grid = CALIBRATION_GRID
-    kept = model.views
-    for views in grid["views"]:
-        model.views = views
-        probs, votes, density = predictions(model, frames, device)
-        for radius, nms, min_prob in itertools.product(grid["radius"], grid["nms"], grid["min_prob"]):
-            masses = vote_counting.clusters(probs, votes, model.cell_px, radius=radius, nms=nms, min_prob=min_prob)
-            for min_px in grid["min_px"]:
-                setting = {**model.counting, "radius": radius, "nms": nms, "min_prob": min_prob, "min_px": min_px,
-                           "readout": "votes", "views": views}
-                tried.append({**setting, **accuracy_table(vote_counting.counts_of(masses, min_px), frames)})
-        expected = vote_counting.expected_counts(probs, density)
-        for round_at in grid["round_at"]:
-            setting = {**model.counting, "readout": "density", "round_at": round_at, "views": views}
-            tried.append({**setting, **accuracy_table(vote_counting.density_counts(expected, round_at), frames)})
-    model.views = kept
+    for radius, nms, min_prob in itertools.product(grid["radius"], grid["nms"], grid["min_prob"]):
+        masses = vote_counting.clusters(probs, votes, model.cell_px, radius=radius, nms=nms, min_prob=min_prob)
+        for min_px in grid["min_px"]:
+            setting = {**model.counting, "radius": radius, "nms": nms, "min_prob": min_prob, "min_px": min_px, "readout": "votes"}
+            tried.append({**setting, **accuracy_table(vote_counting.counts_of(masses, min_px), frames)})
+    expected = vote_counting.expected_counts(probs, density)
+    for round_at in grid["round_at"]:
+        setting = {**model.counting, "readout": "density", "round_at": round_at}
+        tried.append({**setting, **accuracy_table(vote_counting.density_counts(expected, round_at), frames)})
     best = max(tried, key=lambda r: r["val/count_accuracy"])
-    return {k: best[k] for k in (*vote_counting.DEFAULT_COUNTING, "views")}, tried
+    return {k: best[k] for k in vote_counting.DEFAULT_COUNTING}, tried
 
 
 def calibrate_file(path: Path, val, device) -> dict:
@@ -133,12 +128,10 @@ def calibrate_file(path: Path, val, device) -> dict:
     model, meta = load_perception(path)
     model.to(device)
     best, tried = calibrate_counting(model, val, device)
-    after = next(r for r in tried if all(r[k] == best[k] for k in best))
-    model.views = best.pop("views")
     model.counting = dict(best)
-    save_perception(model, path, {**meta, "counting_calibration": {"chosen": best, "views": model.views, "val": after,
-                                                                    "tried": tried}})
-    print(f"counting settings chosen on {val.shape[0]} held-out frames: {best}, views={model.views} -> val count accuracy "
+    after = next(r for r in tried if all(r[k] == best[k] for k in best))
+    save_perception(model, path, {**meta, "counting_calibration": {"chosen": best, "val": after, "tried": tried}})
+    print(f"counting settings chosen on {val.shape[0]} held-out frames: {best} -> val count accuracy "
           f"{after['val/count_accuracy']:.3f} (before: {meta.get('val', {}).get('val/count_accuracy', float('nan')):.3f})")
     return after
 

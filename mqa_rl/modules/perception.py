@@ -41,7 +41,6 @@ from mqa_rl.files import load_versioned, save_versioned
 from mqa_rl.modules import vote_counting
 from mqa_rl.modules.imagenet_backbone import EfficientLiteEncoder
 from mqa_rl.modules.vqa_encoder import standardise
-from mqa_rl.transforms.dihedral import DIHEDRAL, dihedral, undo_dihedral
 
 PERCEPTION_FORMAT = "mqa_rl.perception"
 PERCEPTION_VERSION = 2        # 2: the density head
@@ -84,17 +83,11 @@ class CountingPerception(nn.Module):
     whole of the largest object). ``detail``: channels of the full-resolution path (0: none; with it the
     input is 2 × ``image_size``). ``backbone="efficientnet_lite0"``: the encoder is EfficientNet-Lite0's
     (``imagenet_backbone``; ``load_imagenet`` gives it ImageNet weights) reading the full render, and
-    ``widths`` are the decoder's (the fourth unused). Votes are in output cells, relative to the cell's centre.
-    ``views``: how many of the bin's 8 symmetries ``predict`` averages the class probabilities and the density
-    over (1: the image as rendered; the perception is trained under all 8, and the bin seen from above has no
-    preferred orientation, so each view is another reading of the same pile)."""
+    ``widths`` are the decoder's (the fourth unused). Votes are in output cells, relative to the cell's centre."""
 
     def __init__(self, num_classes: int, widths=(32, 48, 96, 128), image_size: int = 112, counting: dict | None = None,
-                 detail: int = 0, backbone: str = "unet", views: int = 1):
+                 detail: int = 0, backbone: str = "unet"):
         super().__init__()
-        if not (isinstance(views, int) and 1 <= views <= DIHEDRAL):
-            raise ValueError(f"views must be an integer in [1, {DIHEDRAL}] (the symmetries averaged; 1: none), got {views!r}")
-        self.views = views
         unknown = set(counting or {}) - set(vote_counting.DEFAULT_COUNTING)
         if unknown:
             raise ValueError(f"unknown counting settings {sorted(unknown)}; known: {sorted(vote_counting.DEFAULT_COUNTING)}")
@@ -172,20 +165,9 @@ class CountingPerception(nn.Module):
         return self.classes(x), self.votes(x), F.softplus(self.density(x))
 
     def predict(self, rgb: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """uint8 rgb [B, 3, H, W] → (class probabilities [B, K, s, s], votes [B, 2, s, s], density [B, 1, s, s]).
-
-        With ``views`` > 1 the probabilities and the density are the mean over that many symmetries of the image
-        (each map turned back); the votes, vectors whose turning back would need their components turned too,
-        are the image's own."""
-        x = standardise(rgb, self.input_size)
-        if self.views == 1:
-            logits, votes, density = self(x)
-            return logits.softmax(1), votes, density
-        b = x.shape[0]
-        logits, votes, density = self(torch.cat([dihedral(x, t) for t in range(self.views)]))
-        probs = sum(undo_dihedral(p, t) for t, p in enumerate(logits.softmax(1).split(b)))
-        density = sum(undo_dihedral(d, t) for t, d in enumerate(density.split(b)))
-        return probs / self.views, votes[:b], density / self.views
+        """uint8 rgb [B, 3, H, W] → (class probabilities [B, K, s, s], votes [B, 2, s, s], density [B, 1, s, s])."""
+        logits, votes, density = self(standardise(rgb, self.input_size))
+        return logits.softmax(1), votes, density
 
     def count_features(self, rgb: torch.Tensor, trainable: bool = False) -> torch.Tensor:
         """uint8 rgb [B, 3, H, W] → the VQA's per-class count features [B, K, F] (``vote_counting``), with
@@ -202,7 +184,7 @@ class CountingPerception(nn.Module):
 
     def config(self) -> dict:
         return {"num_classes": self.num_classes, "widths": list(self.widths), "image_size": self.image_size,
-                "counting": dict(self.counting), "detail": self.detail_width, "backbone": self.backbone, "views": self.views}
+                "counting": dict(self.counting), "detail": self.detail_width, "backbone": self.backbone}
 
 
 def save_perception(model: CountingPerception, path: str | Path, meta: dict) -> Path:

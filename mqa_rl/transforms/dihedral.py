@@ -49,12 +49,6 @@ def dihedral(x: torch.Tensor, index: int) -> torch.Tensor:
     return x.flip(-1) if index >= 4 else x
 
 
-def undo_dihedral(x: torch.Tensor, index: int) -> torch.Tensor:
-    """The inverse of ``dihedral(·, index)``: a map predicted on the transformed image, put back on the original
-    (unmirror, then turn back)."""
-    return transform_images(x, -(index % 4), index >= 4)
-
-
 def transform_push_map(q: torch.Tensor, k: int, mirror: bool) -> torch.Tensor:
     """Apply the symmetry to per-action values [..., 6273] (a Q vector, a mask)."""
     push = q[..., : actions.NUM_PUSHES].unflatten(-1, (actions.DIRECTIONS, actions.GRID, actions.GRID))
