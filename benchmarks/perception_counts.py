@@ -5,6 +5,7 @@ that resample whole scenes; and by the smallest countable target's visible area.
 
     python benchmarks/perception_counts.py --perception checkpoints/vqa_counting/perception.pt
     python benchmarks/perception_counts.py --perception ... --dataset data/mqa_heldout     # fresh piles
+    python benchmarks/perception_counts.py --perception A.pt --baseline B.pt               # A − B, paired by question
 """
 
 from __future__ import annotations
@@ -32,7 +33,8 @@ AREA_BINS = ((20, 100), (100, 500), (500, float("inf")))
 
 
 def first_images(ds: MQADataset, split: str):
-    """{scene index: (rgb uint8 [3, H, W], visible px [n], class per object [n])} of the split's rest piles."""
+    """{scene index: (rgb uint8 [3, H, W], visible px [n], class per object [n], depth [1, H, W])} of the split's
+    rest piles."""
     env = SapienBinEnv(ds, split=None)
     first = scene_questions(ds)
     out = {}
@@ -42,9 +44,21 @@ def first_images(ds: MQADataset, split: str):
         td = env.reset(question_id=first[scene.id])
         n = len(scene.objects)
         out[i] = (td[keys.RGB], td[keys.VISIBLE_AREA][:n].clone(),
-                  torch.tensor([1 + ds.classes.index(o.class_name) for o in scene.objects]))
+                  torch.tensor([1 + ds.classes.index(o.class_name) for o in scene.objects]), td[keys.DEPTH])
     env.close()
     return out
+
+
+def count_scenes(model, scenes: dict, order: list[int]) -> dict:
+    """{scene index: int64 [K-1]} the perception's count of each class on the scene's first image (with its
+    depth image where the perception reads depth)."""
+    counted = {}
+    for start in range(0, len(order), 32):
+        ids = order[start:start + 32]
+        depth = torch.stack([scenes[i][3] for i in ids]) if model.depth else None
+        for i, row in zip(ids, model.counts(torch.stack([scenes[i][0] for i in ids]), depth)):
+            counted[i] = row
+    return counted
 
 
 @torch.no_grad()
@@ -53,6 +67,8 @@ def main() -> None:
     p.add_argument("--perception", required=True)
     p.add_argument("--dataset", default="data/mqa")
     p.add_argument("--split", default="test")
+    p.add_argument("--baseline", default=None, help="another perception file: also A − baseline on the same images, "
+                                                    "paired by question, 95 %% by scene")
     p.add_argument("--json", default=None, help="also write the figures to this file")
     a = p.parse_args()
     torch.set_num_threads(2)
@@ -63,23 +79,20 @@ def main() -> None:
     render_s = time.perf_counter() - t0
     order = sorted(scenes)
     t0 = time.perf_counter()
-    counted = {}
-    for start in range(0, len(order), 32):
-        ids = order[start:start + 32]
-        for i, row in zip(ids, model.counts(torch.stack([scenes[i][0] for i in ids]))):
-            counted[i] = row
+    counted = count_scenes(model, scenes, order)
     perceive_s = time.perf_counter() - t0
+    baseline = count_scenes(load_perception(a.baseline)[0], scenes, order) if a.baseline else None
     index = {s.id: i for i, s in enumerate(ds.scenes)}
-    rows = []                  # (level, scene, predicted, visible, answer, smallest countable target's area)
+    rows = []                  # (level, scene, predicted, visible, answer, smallest countable target's area, baseline's)
     for q in ds.select(split=a.split, types=["counting"]):
         i = index[q.scene_id]
-        _, visible, classes = scenes[i]
+        _, visible, classes, _ = scenes[i]
         c = 1 + ds.classes.index(q.classes[0])
         areas = visible[(classes == c) & (visible >= COUNTABLE_PX)]
         rows.append((LEVELS.index(ds.scenes[i].difficulty), i, int(counted[i][c - 1]), len(areas), int(q.answer),
-                     float(areas.min()) if len(areas) else float("nan")))
+                     float(areas.min()) if len(areas) else float("nan"), int(baseline[i][c - 1]) if baseline else -1))
     t = torch.tensor(rows, dtype=torch.float64)
-    report = {"perception": a.perception, "dataset": a.dataset, "split": a.split, "step": meta.get("step"),
+    report = {"perception": a.perception, "baseline": a.baseline, "dataset": a.dataset, "split": a.split, "step": meta.get("step"),
               "counting": model.counting,
               "render_s": round(render_s, 1), "perceive_ms_per_image": round(1000 * perceive_s / len(order), 1), "levels": {}}
     print(f"{a.perception} (step {meta.get('step')}) on {a.dataset} {a.split}: {len(order)} first images "
@@ -96,6 +109,11 @@ def main() -> None:
                                    "scenes": n_scenes, "count_equals_answer": answer, "perfect_counter_equals_answer": perfect}
         print(f"  {level:6s} {int(m.sum()):4d} questions, {n_scenes:3d} scenes: count = visible {mean:.3f} "
               f"[{lo:.3f}, {hi:.3f}]  = answer {answer:.3f}  (perfect counter = answer {perfect:.3f})")
+        if baseline is not None:
+            diff = right - (t[m, 6] == t[m, 3]).double()
+            d, dlo, dhi, _ = scene_bootstrap_ci95(diff, t[m, 1].long())
+            report["levels"][level]["minus_baseline"] = {"mean": d, "low": dlo, "high": dhi}
+            print(f"         − baseline ({a.baseline}): {d:+.3f} [{dlo:+.3f}, {dhi:+.3f}]")
     bins = {}
     for low, high in AREA_BINS:
         m = (t[:, 5] >= low) & (t[:, 5] < high)

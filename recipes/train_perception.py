@@ -40,7 +40,6 @@ from mqa_rl.modules import vote_counting
 from mqa_rl.data.dataset import LEVELS
 from mqa_rl.modules.perception import (PERCEPTION_FORMAT, PERCEPTION_VERSION, CountingPerception, check_backbone,
                                        input_size, load_perception, save_perception)
-from mqa_rl.modules.vqa_encoder import standardise
 from mqa_rl.training.model_checkpoint import ModelCheckpoint
 from mqa_rl.training.resume_guard import RESUMABLE, refuse_changed_config
 from mqa_rl.training.run_dir import RunLock, positive_ints, refuse_unresumable
@@ -63,7 +62,7 @@ def check_config(cfg: DictConfig) -> None:
         raise ValueError(f"train.val_fraction={t.val_fraction} must lie in (0, 1): the checkpoint is chosen on held-out scenes")
     if t.lr <= 0 or t.warmup_steps < 0:
         raise ValueError(f"train.lr ({t.lr}) must be > 0 and train.warmup_steps ({t.warmup_steps}) ≥ 0")
-    check_backbone(cfg.model.backbone, cfg.model.detail, cfg.model.imagenet)      # before any frame is loaded
+    check_backbone(cfg.model.backbone, cfg.model.detail, cfg.model.imagenet, cfg.model.depth)   # before any frame is loaded
     for store in cfg.frames.stores:
         read_meta(store)                     # FileNotFoundError naming the recipe that collects it
 
@@ -90,7 +89,10 @@ def accuracy_table(pred: torch.Tensor, frames) -> dict[str, float]:
 def predictions(model: CountingPerception, frames, device, batch_size: int = 64):
     """(class probabilities, votes, density) of every frame, on the CPU."""
     model.eval()
-    out = [model.predict(frames.get(keys.RGB)[s:s + batch_size].to(device)) for s in range(0, frames.shape[0], batch_size)]
+    depth = frames.get(keys.DEPTH) if model.depth else None
+    out = [model.predict(frames.get(keys.RGB)[s:s + batch_size].to(device),
+                         None if depth is None else depth[s:s + batch_size].to(device))
+           for s in range(0, frames.shape[0], batch_size)]
     model.train()
     return tuple(torch.cat([o[i].float().cpu() for o in out]) for i in range(3))
 
@@ -148,14 +150,15 @@ def init_weights(model: CountingPerception, path: str) -> None:
     print(f"started from {path} (new heads: {sorted({k.split('.')[0] for k in missing}) or 'none'})")
 
 
-def augment(rgb: torch.Tensor, omap: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """The same random dihedral transform of a frame's rgb and object map (the bin seen from above is symmetric)."""
-    k = torch.randint(DIHEDRAL, (rgb.shape[0],))
-    rgb, omap = rgb.clone(), omap.clone()
+def augment(*images: torch.Tensor) -> tuple[torch.Tensor, ...]:
+    """The same random dihedral transform of each frame's images (rgb, object map, depth: [B, ..., S, S]);
+    the bin seen from above is symmetric."""
+    k = torch.randint(DIHEDRAL, (images[0].shape[0],))
+    out = tuple(x.clone() for x in images)
     for t in k.unique().tolist():
-        rgb[k == t] = dihedral(rgb[k == t], t)
-        omap[k == t] = dihedral(omap[k == t], t)
-    return rgb, omap
+        for x, y in zip(images, out):
+            y[k == t] = dihedral(x[k == t], t)
+    return out
 
 
 def train(cfg: DictConfig) -> dict:
@@ -181,6 +184,9 @@ def _train(cfg: DictConfig, out: Path) -> dict:
                          f"(model.image_size={cfg.model.image_size}, model.detail={cfg.model.detail}, model.backbone={cfg.model.backbone}): "
                          f"collect frames at that size (collect_frames.py size={want}) or set model.image_size / "
                          f"model.detail / model.backbone")
+    if cfg.model.depth and keys.DEPTH not in frames.keys():
+        raise ValueError(f"model.depth=true needs frames with depth images; {list(cfg.frames.stores)} were collected "
+                         f"without (an older collect_frames.py): collect them again into a new out_dir")
     classes = frames.get(keys.OBJECT_CLASSES)
     num_classes = int(cfg.model.num_classes)
     if int(classes.max()) >= num_classes:
@@ -201,6 +207,7 @@ def _train(cfg: DictConfig, out: Path) -> dict:
         n_train = train_set.shape[0]
     rgb_all, omap_all, cls_all = train_set.get(keys.RGB), train_set.get(keys.OBJECT_MAP), train_set.get(keys.OBJECT_CLASSES)
     vis_all = train_set.get(keys.FRAME_VISIBLE)
+    depth_all = train_set.get(keys.DEPTH) if cfg.model.depth else None
     print(f"{n_train} training frames, {val.shape[0]} validation frames ({int(val_mask.sum())} held out) "
           f"from {len(cfg.frames.stores)} store(s)", flush=True)
 
@@ -208,7 +215,7 @@ def _train(cfg: DictConfig, out: Path) -> dict:
         return calibrate_file(out / PERCEPTION_FILE, val, device)
 
     model = CountingPerception(num_classes, tuple(cfg.model.widths), int(cfg.model.image_size),
-                               detail=int(cfg.model.detail), backbone=cfg.model.backbone)
+                               detail=int(cfg.model.detail), backbone=cfg.model.backbone, depth=bool(cfg.model.depth))
     if cfg.model.imagenet:
         model.load_imagenet()
     model.to(device)
@@ -247,12 +254,14 @@ def _train(cfg: DictConfig, out: Path) -> dict:
         while state["step"] < steps:
             t0 = time.perf_counter()
             idx = torch.randint(n_train, (cfg.train.batch_size,))
-            rgb, omap = rgb_all[idx], omap_all[idx]
+            images = (rgb_all[idx], omap_all[idx]) + ((depth_all[idx],) if depth_all is not None else ())
             if cfg.train.augment:
-                rgb, omap = augment(rgb, omap)
+                images = augment(*images)
+            rgb, omap = images[:2]
+            depth = images[2].to(device) if depth_all is not None else None
             batch = {keys.OBJECT_MAP: omap.to(device), keys.OBJECT_CLASSES: cls_all[idx].to(device),
                      keys.FRAME_VISIBLE: vis_all[idx].to(device)}
-            td = loss(TensorDict(batch, batch_size=[len(idx)]), standardise(rgb.to(device), model.input_size))
+            td = loss(TensorDict(batch, batch_size=[len(idx)]), model.inputs(rgb.to(device), depth))
             optim.zero_grad()
             loss.total(td).backward()
             torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.train.max_grad_norm)

@@ -77,6 +77,10 @@ def build_model(cfg: DictConfig, ds: MQADataset) -> tuple[VQAModel, dict]:
         if perception.num_classes != 1 + len(ds.classes):
             raise ValueError(f"perception {cfg.perception.weights} knows {perception.num_classes - 1} classes, the dataset "
                              f"{len(ds.classes)}: train one on frames of this object library")
+        if perception.depth:
+            raise ValueError(f"perception {cfg.perception.weights} reads depth (model.depth=true), which the VQA does not "
+                             f"pass it yet (its answer contract is rgb: docs/perception.md, 'Depth as an input'): "
+                             f"name an rgb perception, e.g. checkpoints/vqa_counting/perception.pt")
         model = VQAModel(ds.vocab.itos, ds.answers, freeze_encoder=bool(cfg.encoder.freeze),
                          encoder_classes=1 + len(ds.classes), perception=perception.config(), **options)
         model.encoder.load_state_dict(perception.state_dict())

@@ -7,6 +7,9 @@
                                → density       [B, 1, 56, 56]   (each countable object's unit mass, spread
                                                                  over its visible cells)
 
+With ``depth`` the network also reads the camera's depth image (a fourth input channel, ``standardise_depth``):
+the height steps between stacked objects are instance boundaries an appearance may not show.
+
 With ``detail`` > 0 a second path reads the full 2 × ``image_size`` render through two stride-2 stages and
 adds what it sees to the first stage's 56 × 56 map (small targets are 5-25 px at 112 px, 20-100 px in the
 render). Its last layer starts at zero, so a file without it warm-starts one with it.
@@ -46,9 +49,24 @@ PERCEPTION_FORMAT = "mqa_rl.perception"
 PERCEPTION_VERSION = 2        # 2: the density head
 RENDER_SIZE = 224          # the env's image size: areas and the counting rule are in its pixels
 DENSITY_BIAS = -5.0        # softplus(-5) ≈ 0.007 per cell: ~20 objects over 56 × 56 cells at the start
+# depth (metres along the view axis; the camera's range is 1.55-2.0 m) standardised with its mean and spread
+# over six training piles' renders (1.72 ± 0.125 m; the 10-90 % quantiles 1.55-1.89 m)
+DEPTH_MEAN = 1.72
+DEPTH_STD = 0.125
 
 
 BACKBONES = ("unet", "efficientnet_lite0")
+
+
+def standardise_depth(depth: torch.Tensor, size: int) -> torch.Tensor:
+    """float depth [B, 1, H, W] (metres) → float [B, 1, size, size] standardised; resized (antialiased, as
+    the frames' ``resize_depth``) if needed."""
+    if depth.dim() != 4 or depth.shape[1] != 1 or not depth.is_floating_point():
+        raise TypeError(f"depth must be a float [B, 1, H, W] tensor in metres, got {depth.dtype} {list(depth.shape)}")
+    x = depth.float()
+    if x.shape[-2:] != (size, size):
+        x = F.interpolate(x, size=(size, size), mode="bilinear", align_corners=False, antialias=True)
+    return (x - DEPTH_MEAN) / DEPTH_STD
 
 
 def input_size(image_size: int, detail: int, backbone: str = "unet") -> int:
@@ -57,11 +75,15 @@ def input_size(image_size: int, detail: int, backbone: str = "unet") -> int:
     return int(image_size) * (2 if detail or backbone != "unet" else 1)
 
 
-def check_backbone(backbone: str, detail: int = 0, imagenet: bool = False) -> None:
-    """ValueError unless ``backbone`` is known, reads the full render without the detail path, and (``imagenet``)
-    has ImageNet weights; the recipe calls it before loading frames, the model when built."""
+def check_backbone(backbone: str, detail: int = 0, imagenet: bool = False, depth: bool = False) -> None:
+    """ValueError unless ``backbone`` is known, reads the full render without the detail path, (``imagenet``)
+    has ImageNet weights and (``depth``) takes a depth channel; the recipe calls it before loading frames,
+    the model when built."""
     if backbone not in BACKBONES:
         raise ValueError(f"unknown backbone {backbone!r}; known: {list(BACKBONES)}")
+    if depth and backbone != "unet":
+        raise ValueError(f"depth=true: the depth channel exists for backbone=unet only (got {backbone}, whose "
+                         f"ImageNet stem reads 3 channels)")
     if detail and backbone != "unet":
         raise ValueError(f"backbone={backbone} reads the full render already: set detail=0 (got {detail})")
     if imagenet and backbone == "unet":
@@ -83,10 +105,11 @@ class CountingPerception(nn.Module):
     whole of the largest object). ``detail``: channels of the full-resolution path (0: none; with it the
     input is 2 × ``image_size``). ``backbone="efficientnet_lite0"``: the encoder is EfficientNet-Lite0's
     (``imagenet_backbone``; ``load_imagenet`` gives it ImageNet weights) reading the full render, and
-    ``widths`` are the decoder's (the fourth unused). Votes are in output cells, relative to the cell's centre."""
+    ``widths`` are the decoder's (the fourth unused). ``depth``: a fourth input channel, the standardised depth
+    image (``predict`` then needs it). Votes are in output cells, relative to the cell's centre."""
 
     def __init__(self, num_classes: int, widths=(32, 48, 96, 128), image_size: int = 112, counting: dict | None = None,
-                 detail: int = 0, backbone: str = "unet"):
+                 detail: int = 0, backbone: str = "unet", depth: bool = False):
         super().__init__()
         unknown = set(counting or {}) - set(vote_counting.DEFAULT_COUNTING)
         if unknown:
@@ -98,21 +121,23 @@ class CountingPerception(nn.Module):
             raise ValueError(f"image_size must be a multiple of 16, got {image_size}")
         if detail < 0:
             raise ValueError(f"detail must be ≥ 0 channels (0: no full-resolution path), got {detail}")
-        check_backbone(backbone, detail)
+        check_backbone(backbone, detail, depth=depth)
+        self.depth = bool(depth)
+        cin = 4 if self.depth else 3
         self.num_classes = int(num_classes)
         self.widths = tuple(int(w) for w in widths)
         self.image_size = int(image_size)
         self.backbone = backbone
         w1, w2, w3, w4 = self.widths
         if backbone == "unet":
-            self.down = nn.ModuleList([_block(3, w1, 2), _block(w1, w2, 2), _block(w2, w3, 2), _block(w3, w4, 2)])
+            self.down = nn.ModuleList([_block(cin, w1, 2), _block(w1, w2, 2), _block(w2, w3, 2), _block(w3, w4, 2)])
             c1, c2, c3, c4 = self.widths
         else:
             self.encoder = EfficientLiteEncoder()
             c1, c2, c3, c4 = EfficientLiteEncoder.channels
         self.detail_width = int(detail)
         if detail:
-            self.detail = nn.Sequential(_block(3, detail, 2), _block(detail, w1, 2), nn.Conv2d(w1, w1, 1))
+            self.detail = nn.Sequential(_block(cin, detail, 2), _block(detail, w1, 2), nn.Conv2d(w1, w1, 1))
             nn.init.zeros_(self.detail[-1].weight)
             nn.init.zeros_(self.detail[-1].bias)
         self.up3 = _block(c4 + c3, w3, 1)
@@ -142,7 +167,7 @@ class CountingPerception(nn.Module):
         self.encoder.load_imagenet()
 
     def encode(self, x: torch.Tensor) -> list[torch.Tensor]:
-        """Standardised rgb → the encoder's four maps, finest (the output's cells) first."""
+        """Standardised rgb (and depth: ``inputs``) → the encoder's four maps, finest (the output's cells) first."""
         if self.backbone != "unet":
             return self.encoder(x)
         if self.detail_width:          # the main path reads the render at image_size, the detail path in full
@@ -164,27 +189,40 @@ class CountingPerception(nn.Module):
             x = up(torch.cat([x, skip], 1))
         return self.classes(x), self.votes(x), F.softplus(self.density(x))
 
-    def predict(self, rgb: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """uint8 rgb [B, 3, H, W] → (class probabilities [B, K, s, s], votes [B, 2, s, s], density [B, 1, s, s])."""
-        logits, votes, density = self(standardise(rgb, self.input_size))
+    def inputs(self, rgb: torch.Tensor, depth: torch.Tensor | None = None) -> torch.Tensor:
+        """uint8 rgb [B, 3, H, W] (and, for a perception with ``depth``, float depth [B, 1, H, W] in metres) →
+        the network's standardised input."""
+        x = standardise(rgb, self.input_size)
+        if not self.depth:
+            return x
+        if depth is None:
+            raise ValueError("this perception reads depth too (trained with model.depth=true): pass the frame's depth "
+                             "image (metres, [B, 1, H, W]) beside its rgb")
+        return torch.cat([x, standardise_depth(depth.to(x.device), self.input_size)], 1)
+
+    def predict(self, rgb: torch.Tensor, depth: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """uint8 rgb [B, 3, H, W] (and depth, see ``inputs``) → (class probabilities [B, K, s, s], votes
+        [B, 2, s, s], density [B, 1, s, s])."""
+        logits, votes, density = self(self.inputs(rgb, depth))
         return logits.softmax(1), votes, density
 
-    def count_features(self, rgb: torch.Tensor, trainable: bool = False) -> torch.Tensor:
-        """uint8 rgb [B, 3, H, W] → the VQA's per-class count features [B, K, F] (``vote_counting``), with
-        this perception's own counting settings; ``trainable``: with gradients (fine-tuning under the VQA)."""
+    def count_features(self, rgb: torch.Tensor, trainable: bool = False, depth: torch.Tensor | None = None) -> torch.Tensor:
+        """uint8 rgb [B, 3, H, W] (and depth) → the VQA's per-class count features [B, K, F] (``vote_counting``),
+        with this perception's own counting settings; ``trainable``: with gradients (fine-tuning under the VQA)."""
         with torch.set_grad_enabled(trainable and torch.is_grad_enabled()):
-            probs, votes, density = (t.float().cpu() for t in self.predict(rgb))
+            probs, votes, density = (t.float().cpu() for t in self.predict(rgb, depth))
             read = vote_counting.trainable_count_features if trainable else vote_counting.count_features
             return read(probs, votes, density, self.cell_px, **self.counting)
 
-    def counts(self, rgb: torch.Tensor) -> torch.Tensor:
-        """uint8 rgb [B, 3, H, W] → int64 [B, K-1]: the objects of each class (1 … K-1) it counts."""
-        probs, votes, density = (t.float().cpu() for t in self.predict(rgb))
+    def counts(self, rgb: torch.Tensor, depth: torch.Tensor | None = None) -> torch.Tensor:
+        """uint8 rgb [B, 3, H, W] (and depth) → int64 [B, K-1]: the objects of each class (1 … K-1) it counts."""
+        probs, votes, density = (t.float().cpu() for t in self.predict(rgb, depth))
         return vote_counting.counts(probs, votes, density, self.cell_px, **self.counting)
 
     def config(self) -> dict:
         return {"num_classes": self.num_classes, "widths": list(self.widths), "image_size": self.image_size,
-                "counting": dict(self.counting), "detail": self.detail_width, "backbone": self.backbone}
+                "counting": dict(self.counting), "detail": self.detail_width, "backbone": self.backbone,
+                "depth": self.depth}
 
 
 def save_perception(model: CountingPerception, path: str | Path, meta: dict) -> Path:

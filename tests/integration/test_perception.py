@@ -177,6 +177,8 @@ def test_frames_perception_and_counting_vqa_recipes_end_to_end(small_dataset, sp
     n = len(small_dataset.scenes)
     assert records.shape[0] == 2 * n and records.get(keys.RGB).shape[-1] == 112
     assert records.get(keys.PUSHES).tolist() == [0, 1] * n
+    depth = records.get(keys.DEPTH)                                    # the depth image, resized as the rgb
+    assert depth.dtype == torch.float16 and depth.shape[1:] == (1, 112, 112) and (depth > 0).all()
     sizes = torch.tensor([len(small_dataset.scenes[int(i)].objects) for i in records.get(keys.SCENE)])
     assert ((records.get(keys.OBJECT_CLASSES) > 0).sum(-1) == sizes).all()
     assert ((records.get(keys.FRAME_VISIBLE) > 0).sum(-1) <= sizes).all()
@@ -210,6 +212,12 @@ def test_frames_perception_and_counting_vqa_recipes_end_to_end(small_dataset, sp
             train.train(compose_recipe_config("train_perception", [*targs, "train.steps=4", "resume=true"]))
     again = train.train(compose_recipe_config("train_perception", [*targs, "train.steps=4", "resume=true"]))
     assert again["steps"] == 4 and 0.0 <= again["calibrated_val_count_accuracy"] <= 1.0
+    with pytest.raises(ValueError, match="unet only"):
+        train.train(compose_recipe_config("train_perception", [*targs, "train.steps=2", "model.depth=true",
+                                                               "model.backbone=efficientnet_lite0"]))
+    with_depth = train.train(compose_recipe_config("train_perception", [              # the depth arm of the ablation
+        *(a for a in targs if not a.startswith("out_dir=")), "train.steps=2", "model.depth=true", f"out_dir={tmp_path / 'rgbd'}"]))
+    assert load_perception(with_depth["perception"])[0].depth
     chosen = load_perception(out / "perception.pt")[1]["counting_calibration"]["chosen"]
     assert load_perception(out / "perception.pt")[0].counting == chosen       # the file counts with what was chosen
 
@@ -227,6 +235,10 @@ def test_frames_perception_and_counting_vqa_recipes_end_to_end(small_dataset, sp
     tuned_model = load_vqa(tuned["vqa"])
     assert not tuned_model.config["freeze_encoder"] and tuned_model.meta["encoder"]["init_from"] == summary["vqa"]
     assert any(not torch.equal(tuned_model.encoder.state_dict()[k], v) for k, v in model.encoder.state_dict().items())
+    with pytest.raises(ValueError, match="reads depth"):            # the depth arm is not wired into the VQA
+        train_vqa.train(compose_recipe_config("train_vqa", [*vargs, f"perception.weights={with_depth['perception']}",
+                                                            f"out_dir={tmp_path / 'depth_vqa'}"]))
+    assert not (tmp_path / "depth_vqa" / "vqa.pt").exists()
     with pytest.raises(ValueError, match="does not fit this VQA"):   # a head of another architecture
         train_vqa.train(compose_recipe_config("train_vqa", [*vargs, "vqa.dim=16", f"init_from={summary['vqa']}",
                                                             f"out_dir={tmp_path / 'bad'}"]))
@@ -298,3 +310,21 @@ def test_the_imagenet_backbone_loads_the_wheels_weights_and_round_trips(tmp_path
         CountingPerception(K, backbone="resnet")
     with pytest.raises(ValueError, match="efficientnet_lite0 only"):
         CountingPerception(K).load_imagenet()
+
+
+def test_a_depth_perception_reads_the_depth_image_and_asks_for_it(tmp_path):
+    torch.manual_seed(0)
+    model = CountingPerception(K, widths=(8, 8, 16, 16), depth=True).eval()
+    rgb = torch.randint(0, 255, (2, 3, 224, 224), dtype=torch.uint8)
+    floor = torch.full((2, 1, 224, 224), 0.9)
+    pile = floor.clone()
+    pile[:, :, 60:120, 60:120] = 0.8                                   # an object 10 cm above the floor
+    assert model.down[0][0].in_channels == 4 and model.input_size == 112
+    assert not torch.allclose(model.predict(rgb, floor)[2], model.predict(rgb, pile)[2])    # depth is read
+    with pytest.raises(ValueError, match="reads depth too"):
+        model.predict(rgb)
+    with pytest.raises(TypeError, match="float"):
+        model.predict(rgb, floor.to(torch.uint8))
+    loaded, _ = load_perception(save_perception(model, tmp_path / "p.pt", {}))
+    assert loaded.depth and torch.equal(loaded.counts(rgb, pile), model.counts(rgb, pile))
+    assert not CountingPerception(K, widths=(8, 8, 16, 16)).depth                  # rgb only by default
