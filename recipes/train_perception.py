@@ -32,7 +32,7 @@ from tensordict import TensorDict
 from tqdm import tqdm
 
 from mqa_rl import keys
-from mqa_rl.collectors.perception_frames import load_frames
+from mqa_rl.collectors.perception_frames import DEPTH_SCHEMA, load_frames
 from mqa_rl.collectors.store import read_meta
 from mqa_rl.files import load_versioned, write_atomic
 from mqa_rl.losses.perception import PerceptionLoss, countable_counts
@@ -49,6 +49,8 @@ from mqa_rl.training.vqa_data import scene_split
 from mqa_rl.transforms.dihedral import DIHEDRAL, dihedral
 
 PERCEPTION_FILE = "perception.pt"
+# what training reads of a frame (a depth perception also its DEPTH: an rgb run leaves it on disk)
+FRAME_KEYS = (keys.RGB, keys.OBJECT_MAP, keys.OBJECT_CLASSES, keys.FRAME_VISIBLE, keys.SCENE, keys.LEVEL)
 # the counting settings tried on held-out pretraining scenes (vote_counting.DEFAULT_COUNTING: what they mean)
 CALIBRATION_GRID = {"radius": (2.5, 4.0), "nms": (5, 9), "min_prob": (0.05, 0.3), "min_px": (12, 16, 20, 28, 36),
                     "round_at": (0.3, 0.4, 0.5, 0.6, 0.7)}
@@ -175,8 +177,11 @@ def _train(cfg: DictConfig, out: Path) -> dict:
     device = torch.device(cfg.device)
     config = OmegaConf.to_container(cfg, resolve=True)
 
-    frames = load_frames(list(cfg.frames.stores))
     metas = [read_meta(s) for s in cfg.frames.stores]
+    if cfg.model.depth and any(m.get("schema", 1) < DEPTH_SCHEMA for m in metas):
+        raise ValueError(f"model.depth=true needs frames with depth images; {list(cfg.frames.stores)} were collected "
+                         f"without (an older collect_frames.py): collect them again into a new out_dir")
+    frames = load_frames(list(cfg.frames.stores), (*FRAME_KEYS, *((keys.DEPTH,) if cfg.model.depth else ())))
     sizes = {m["plan"]["size"] for m in metas}
     want = input_size(cfg.model.image_size, cfg.model.detail, cfg.model.backbone)
     if sizes != {want}:
@@ -184,9 +189,6 @@ def _train(cfg: DictConfig, out: Path) -> dict:
                          f"(model.image_size={cfg.model.image_size}, model.detail={cfg.model.detail}, model.backbone={cfg.model.backbone}): "
                          f"collect frames at that size (collect_frames.py size={want}) or set model.image_size / "
                          f"model.detail / model.backbone")
-    if cfg.model.depth and keys.DEPTH not in frames.keys():
-        raise ValueError(f"model.depth=true needs frames with depth images; {list(cfg.frames.stores)} were collected "
-                         f"without (an older collect_frames.py): collect them again into a new out_dir")
     classes = frames.get(keys.OBJECT_CLASSES)
     num_classes = int(cfg.model.num_classes)
     if int(classes.max()) >= num_classes:

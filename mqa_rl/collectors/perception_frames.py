@@ -7,7 +7,7 @@ one record of an ``EpisodeStore`` (atomic chunks, resumable, locked; slot = epis
 
     rgb            uint8 [3, S, S]    the render, resized to the perception's input (antialiased, as
                                       ``standardise`` does at answer time)
-    depth          float16 [1, S, S]  the depth image (metres), resized alike (``resize_depth``; schema 2)
+    depth          float16 [1, S, S]  the depth image (metres), resized alike (``perception.resize_depth``; schema 2)
     object_map     uint8 [S, S]       0 = bin, 1 + the object's slot in the scene (nearest pixel)
     visible_area   float32 [50]       each object's visible pixels in the 224-px render (the counting rule's unit)
     object_classes int64 [50]         1 + index into the dataset's classes; 0 = no object in that slot
@@ -38,8 +38,10 @@ from mqa_rl.collectors.store import SCENE_OFFSET, EpisodeStore, load_records
 from mqa_rl.data.dataset import LEVELS, MQADataset, dataset_fingerprint
 from mqa_rl.envs import actions
 from mqa_rl.envs.sapien_bin import MAX_OBJECTS, SapienBinEnv
+from mqa_rl.modules.perception import resize_depth
 
 SCHEMA = 2        # 2: frames hold depth
+DEPTH_SCHEMA = 2  # the first schema whose frames hold depth
 
 
 def scene_fingerprint(scene) -> str:
@@ -67,17 +69,10 @@ def resize_rgb(rgb: torch.Tensor, size: int) -> torch.Tensor:
     return x[0].round().clamp(0, 255).to(torch.uint8)
 
 
-def resize_depth(depth: torch.Tensor, size: int) -> torch.Tensor:
-    """float [1, H, W] metres → float16 [1, size, size], antialiased bilinear (``perception.standardise_depth``'s resize)."""
-    if depth.shape[-1] != size:
-        depth = F.interpolate(depth[None].float(), size=(size, size), mode="bilinear", align_corners=False, antialias=True)[0]
-    return depth.to(torch.float16)
-
-
 def _frame(env: SapienBinEnv, td, size: int) -> dict:
     omap = object_map(env)
     stride = omap.shape[-1] // size
-    return {keys.RGB: resize_rgb(td[keys.RGB], size), keys.DEPTH: resize_depth(td[keys.DEPTH], size),
+    return {keys.RGB: resize_rgb(td[keys.RGB], size), keys.DEPTH: resize_depth(td[keys.DEPTH][None], size)[0].half(),
             keys.OBJECT_MAP: omap[stride // 2::stride, stride // 2::stride].clone(),
             keys.FRAME_VISIBLE: td[keys.VISIBLE_AREA].clone(), keys.PUSHES: torch.tensor(int(td[keys.PUSH_COUNT]))}
 

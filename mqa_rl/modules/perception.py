@@ -58,15 +58,21 @@ DEPTH_STD = 0.125
 BACKBONES = ("unet", "efficientnet_lite0")
 
 
-def standardise_depth(depth: torch.Tensor, size: int) -> torch.Tensor:
-    """float depth [B, 1, H, W] (metres) → float [B, 1, size, size] standardised; resized (antialiased, as
-    the frames' ``resize_depth``) if needed."""
+def resize_depth(depth: torch.Tensor, size: int) -> torch.Tensor:
+    """float depth [B, 1, H, W] (metres) → float [B, 1, size, size], antialiased bilinear as ``standardise``
+    resizes rgb (the frame collector stores this, the perception reads it)."""
     if depth.dim() != 4 or depth.shape[1] != 1 or not depth.is_floating_point():
         raise TypeError(f"depth must be a float [B, 1, H, W] tensor in metres, got {depth.dtype} {list(depth.shape)}")
     x = depth.float()
     if x.shape[-2:] != (size, size):
         x = F.interpolate(x, size=(size, size), mode="bilinear", align_corners=False, antialias=True)
-    return (x - DEPTH_MEAN) / DEPTH_STD
+    return x
+
+
+def standardise_depth(depth: torch.Tensor, size: int) -> torch.Tensor:
+    """float depth [B, 1, H, W] (metres) → float [B, 1, size, size] standardised (``resize_depth``, then the
+    camera's mean and spread)."""
+    return (resize_depth(depth, size) - DEPTH_MEAN) / DEPTH_STD
 
 
 def input_size(image_size: int, detail: int, backbone: str = "unet") -> int:
