@@ -84,7 +84,6 @@ FRAME_FULL = "full_area"                      # under FIRST / LAST: float32 [K] 
 OBJECT_MAP = "object_map"                     # under FIRST / LAST: uint8 [H, W] 0 = bin, 1 + the object's slot (scene order)
 CLASS_MAP = "class_map"                       # pretraining frames: uint8 [H, W] 0 = bin, 1 + index into MQADataset.classes
 OBJECT_CLASSES = "object_classes"               # perception frames: int64 [K] 1 + index into MQADataset.classes of each scene slot, 0 = empty
-OBJECT_IDS = "object_ids"                     # perception frames: int64 [K] 1 + index into MQADataset.library of each scene slot, 0 = empty
 CLASS_CELLS = "class_cells"                   # push-trunk pretraining frames: float16 [1 + classes, GRID, GRID] class fractions per action-grid cell (SapienBinEnv.class_cells)
 
 # the VQA (mqa_rl.modules.vqa) and its loss (mqa_rl.losses.vqa)

@@ -32,7 +32,7 @@ from tensordict import TensorDict
 from tqdm import tqdm
 
 from mqa_rl import keys
-from mqa_rl.collectors.perception_frames import DEPTH_SCHEMA, load_frames, store_dataset
+from mqa_rl.collectors.perception_frames import DEPTH_SCHEMA, load_frames
 from mqa_rl.collectors.store import read_meta
 from mqa_rl.files import load_versioned, write_atomic
 from mqa_rl.losses.perception import PerceptionLoss, countable_counts
@@ -53,7 +53,7 @@ PERCEPTION_FILE = "perception.pt"
 FRAME_KEYS = (keys.RGB, keys.OBJECT_MAP, keys.OBJECT_CLASSES, keys.FRAME_VISIBLE, keys.SCENE, keys.LEVEL)
 # the counting settings tried on held-out pretraining scenes (vote_counting.DEFAULT_COUNTING: what they mean)
 CALIBRATION_GRID = {"radius": (2.5, 4.0), "nms": (5, 9), "min_prob": (0.05, 0.3), "min_px": (12, 16, 20, 28, 36),
-                    "round_at": (0.3, 0.4, 0.5, 0.6, 0.7), "object_min_prob": (0.0, 0.05, 0.1, 0.2, 0.3, 0.5)}
+                    "round_at": (0.3, 0.4, 0.5, 0.6, 0.7)}
 COMMAND = "python recipes/train_perception.py"
 
 
@@ -89,43 +89,29 @@ def accuracy_table(pred: torch.Tensor, frames) -> dict[str, float]:
 
 @torch.no_grad()
 def predictions(model: CountingPerception, frames, device, batch_size: int = 64):
-    """(the class head's probabilities, votes, density) of every frame, on the CPU."""
+    """(class probabilities, votes, density) of every frame, on the CPU."""
     model.eval()
     depth = frames.get(keys.DEPTH) if model.depth else None
-    out = [model.heads(frames.get(keys.RGB)[s:s + batch_size].to(device),
-                       None if depth is None else depth[s:s + batch_size].to(device))
+    out = [model.predict(frames.get(keys.RGB)[s:s + batch_size].to(device),
+                         None if depth is None else depth[s:s + batch_size].to(device))
            for s in range(0, frames.shape[0], batch_size)]
     model.train()
     return tuple(torch.cat([o[i].float().cpu() for o in out]) for i in range(3))
 
 
 def count_accuracy(model: CountingPerception, frames, device) -> dict[str, float]:
-    """``accuracy_table`` of the model's counts with its own counting settings, (``val/density_*``) of its
-    density readout rounded to the nearest count and, for an objects head, (``val/objects_*``) of its objects
-    counted from the rule's 20 px."""
-    head_probs, votes, density = predictions(model, frames, device)
-    probs, settings = model.readout_inputs(head_probs)
-    out = accuracy_table(vote_counting.counts(probs, votes, density, model.cell_px, **settings), frames)
+    """``accuracy_table`` of the model's counts with its own counting settings, and (``val/density_*``)
+    of its density readout rounded to the nearest count."""
+    probs, votes, density = predictions(model, frames, device)
+    out = accuracy_table(vote_counting.counts(probs, votes, density, model.cell_px, **model.counting), frames)
     dens = accuracy_table(vote_counting.density_counts(vote_counting.expected_counts(probs, density)), frames)
-    out.update({k.replace("val/", "val/density_"): v for k, v in dens.items()})
-    if model.objects is not None:
-        masses = vote_counting.object_masses(head_probs, model.object_classes, model.num_classes, model.cell_px)
-        objs = accuracy_table(vote_counting.counts_of(masses), frames)
-        out.update({k.replace("val/", "val/objects_"): v for k, v in objs.items()})
-    return out
-
-
-def best_readout(metrics: dict[str, float]) -> float:
-    """The score a checkpoint is chosen by: the count accuracy of its best readout."""
-    return max(v for k, v in metrics.items() if k in ("val/count_accuracy", "val/density_count_accuracy",
-                                                      "val/objects_count_accuracy"))
+    return {**out, **{k.replace("val/", "val/density_"): v for k, v in dens.items()}}
 
 
 def calibrate_counting(model: CountingPerception, frames, device) -> tuple[dict, list[dict]]:
     """The counting settings (``CALIBRATION_GRID``) under which the model counts the most (frame, class present)
     pairs of ``frames`` (held-out pretraining scenes) right, and every setting's accuracy."""
-    head_probs, votes, density = predictions(model, frames, device)
-    probs = model.class_probs(head_probs)
+    probs, votes, density = predictions(model, frames, device)
     tried = []
     grid = CALIBRATION_GRID
     for radius, nms, min_prob in itertools.product(grid["radius"], grid["nms"], grid["min_prob"]):
@@ -137,13 +123,6 @@ def calibrate_counting(model: CountingPerception, frames, device) -> tuple[dict,
     for round_at in grid["round_at"]:
         setting = {**model.counting, "readout": "density", "round_at": round_at}
         tried.append({**setting, **accuracy_table(vote_counting.density_counts(expected, round_at), frames)})
-    if model.objects is not None:
-        for min_prob in grid["object_min_prob"]:
-            masses = vote_counting.object_masses(head_probs, model.object_classes, model.num_classes, model.cell_px,
-                                                 min_prob=min_prob)
-            for min_px in grid["min_px"]:
-                setting = {**model.counting, "readout": "objects", "min_prob": min_prob, "min_px": min_px}
-                tried.append({**setting, **accuracy_table(vote_counting.counts_of(masses, min_px), frames)})
     best = max(tried, key=lambda r: r["val/count_accuracy"])
     return {k: best[k] for k in vote_counting.DEFAULT_COUNTING}, tried
 
@@ -165,11 +144,8 @@ def init_weights(model: CountingPerception, path: str) -> None:
     """Start from a perception file's weights (same architecture); heads it lacks keep their initialisation."""
     blob = load_versioned(path, PERCEPTION_FORMAT, PERCEPTION_VERSION, what="perception file (init_from)",
                           hint="name a perception.pt of recipes/train_perception.py")
-    state = dict(blob["state_dict"])
-    if state.get("classes.weight") is not None and state["classes.weight"].shape[0] != model.head_channels:
-        state = {k: v for k, v in state.items() if not k.startswith("classes.")}   # a class head under an objects head
-    missing, unexpected = model.load_state_dict(state, strict=False)
-    if unexpected or any(not k.startswith(("density.", "detail.", "classes.")) for k in missing):
+    missing, unexpected = model.load_state_dict(blob["state_dict"], strict=False)
+    if unexpected or any(not k.startswith(("density.", "detail.")) for k in missing):
         raise ValueError(f"init_from={path} does not fit model.widths={list(model.widths)}, model.detail={model.detail_width}, "
                          f"model.backbone={model.backbone} "
                          f"(missing {missing[:4]}, unexpected {unexpected[:4]}): match the architecture it was trained with")
@@ -205,8 +181,7 @@ def _train(cfg: DictConfig, out: Path) -> dict:
     if cfg.model.depth and any(m.get("schema", 1) < DEPTH_SCHEMA for m in metas):
         raise ValueError(f"model.depth=true needs frames with depth images; {list(cfg.frames.stores)} were collected "
                          f"without (an older collect_frames.py): collect them again into a new out_dir")
-    frames = load_frames(list(cfg.frames.stores), (*FRAME_KEYS, *((keys.DEPTH,) if cfg.model.depth else ())),
-                         with_object_ids=bool(cfg.model.objects))
+    frames = load_frames(list(cfg.frames.stores), (*FRAME_KEYS, *((keys.DEPTH,) if cfg.model.depth else ())))
     sizes = {m["plan"]["size"] for m in metas}
     want = input_size(cfg.model.image_size, cfg.model.detail, cfg.model.backbone)
     if sizes != {want}:
@@ -233,7 +208,6 @@ def _train(cfg: DictConfig, out: Path) -> dict:
         train_set = train_set[keep.sort().values]
         n_train = train_set.shape[0]
     rgb_all, omap_all, cls_all = train_set.get(keys.RGB), train_set.get(keys.OBJECT_MAP), train_set.get(keys.OBJECT_CLASSES)
-    ids_all = train_set.get(keys.OBJECT_IDS) if cfg.model.objects else None
     vis_all = train_set.get(keys.FRAME_VISIBLE)
     depth_all = train_set.get(keys.DEPTH) if cfg.model.depth else None
     print(f"{n_train} training frames, {val.shape[0]} validation frames ({int(val_mask.sum())} held out) "
@@ -242,13 +216,8 @@ def _train(cfg: DictConfig, out: Path) -> dict:
     if cfg.calibrate_only:                    # a run stopped early: choose its counting settings now
         return calibrate_file(out / PERCEPTION_FILE, val, device)
 
-    objects = None
-    if cfg.model.objects:                     # the class of every library object (the stores share one library)
-        ds = store_dataset(cfg.frames.stores[0])
-        objects = [1 + ds.classes.index(name) for name, _ in ds.library]
     model = CountingPerception(num_classes, tuple(cfg.model.widths), int(cfg.model.image_size),
-                               detail=int(cfg.model.detail), backbone=cfg.model.backbone, depth=bool(cfg.model.depth),
-                               objects=objects)
+                               detail=int(cfg.model.detail), backbone=cfg.model.backbone, depth=bool(cfg.model.depth))
     if cfg.model.imagenet:
         model.load_imagenet()
     model.to(device)
@@ -294,8 +263,6 @@ def _train(cfg: DictConfig, out: Path) -> dict:
             depth = images[2].to(device) if depth_all is not None else None
             batch = {keys.OBJECT_MAP: omap.to(device), keys.OBJECT_CLASSES: cls_all[idx].to(device),
                      keys.FRAME_VISIBLE: vis_all[idx].to(device)}
-            if ids_all is not None:
-                batch[keys.OBJECT_IDS] = ids_all[idx].to(device)
             td = loss(TensorDict(batch, batch_size=[len(idx)]), model.inputs(rgb.to(device), depth))
             optim.zero_grad()
             loss.total(td).backward()
@@ -314,7 +281,7 @@ def _train(cfg: DictConfig, out: Path) -> dict:
                 metrics["train/lr"] = optim.param_groups[0]["lr"]
                 metrics.update(count_accuracy(model, val, device))
                 window, t_window = {}, time.perf_counter()
-                score = best_readout(metrics)
+                score = max(metrics["val/count_accuracy"], metrics["val/density_count_accuracy"])   # either readout
                 if score > state["best"]:
                     state["best"], state["best_step"] = score, step
                     save_perception(model, out / PERCEPTION_FILE,

@@ -34,7 +34,7 @@ from tqdm import tqdm
 
 from mqa_rl import keys
 from mqa_rl.collectors.rollouts import episode_seed, object_map
-from mqa_rl.collectors.store import SCENE_OFFSET, EpisodeStore, load_records, read_meta
+from mqa_rl.collectors.store import SCENE_OFFSET, EpisodeStore, load_records
 from mqa_rl.data.dataset import LEVELS, MQADataset, dataset_fingerprint
 from mqa_rl.envs import actions
 from mqa_rl.envs.sapien_bin import MAX_OBJECTS, SapienBinEnv
@@ -174,44 +174,13 @@ def collect_perception_frames(out_dir, dataset, *, episodes_per_scene: int, push
     return summary
 
 
-def store_dataset(store) -> MQADataset:
-    """The pretraining dataset a frame store was collected from (its manifest checked against the store's)."""
-    meta = read_meta(store)
-    root = Path(meta["dataset"]["root"])
-    if not root.exists():
-        raise FileNotFoundError(f"{store} was collected from the dataset {root}, which is not here: make it again "
-                                f"(recipes/make_dataset.py with the seed it was made with) or collect frames anew")
-    if dataset_fingerprint(root) != meta["dataset"]["manifest_sha256"]:
-        raise ValueError(f"{root} is not the dataset {store} was collected from (its manifest changed): "
-                         f"collect the frames anew from it")
-    return MQADataset(root)
-
-
-def object_ids(ds: MQADataset, scene_index: torch.Tensor) -> torch.Tensor:
-    """int64 [N, 50]: 1 + each scene slot's index in ``ds.library`` (0: no object) for frames of ``ds``'s scenes."""
-    where = {name: i for i, name in enumerate(ds.library)}
-    table = torch.zeros(len(ds.scenes), MAX_OBJECTS, dtype=torch.int64)
-    for s, scene in enumerate(ds.scenes):
-        table[s, :len(scene.objects)] = torch.tensor([1 + where[(o.class_name, o.instance_id)] for o in scene.objects])
-    return table[scene_index]
-
-
-def load_frames(stores, select=None, with_object_ids: bool = False) -> TensorDict:
-    """The frames of one or more stores as one TensorDict [N] in memory; scene ids made distinct per store.
-    ``with_object_ids``: also each slot's library object (``OBJECT_IDS``, from the stores' datasets, which
-    must share one library)."""
-    parts, library = [], None
+def load_frames(stores, select=None) -> TensorDict:
+    """The frames of one or more stores as one TensorDict [N] in memory; scene ids made distinct per store."""
+    parts = []
     for i, store in enumerate([stores] if isinstance(stores, (str, Path)) else list(stores)):
         td = load_records(store, select, require_complete=False)
         if td.shape[0] == 0:
             raise ValueError(f"{store} holds no frames yet: run recipes/collect_frames.py")
-        if with_object_ids:
-            ds = store_dataset(store)
-            if library is not None and ds.library != library:
-                raise ValueError(f"{store}'s dataset has another object library than the stores before it: an objects "
-                                 f"head needs one library (frames of datasets made by one generator)")
-            library = ds.library
-            td.set(keys.OBJECT_IDS, object_ids(ds, td.get(keys.SCENE)))
         td.set(keys.SCENE, td.get(keys.SCENE) + i * SCENE_OFFSET)
         parts.append(td)
     return torch.cat(parts)

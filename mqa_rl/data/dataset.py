@@ -307,12 +307,6 @@ class MQADataset:
     def assets(self, scene: Scene) -> list[ObjectAsset]:
         return [self.asset(o.class_name, o.instance_id) for o in scene.objects]
 
-    @property
-    def library(self) -> tuple[tuple[str, int], ...]:
-        """Every object of the library as (class, instance), in ``objects.json``'s order. A scene draws its
-        objects from it without replacement, so within one pile an object of the library is one instance."""
-        return tuple(self._object_rows)
-
     def summary(self) -> str:
         from mqa_rl.data.stats import format_statistics
 

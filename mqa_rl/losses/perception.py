@@ -1,8 +1,7 @@
 """The counting perception's loss, with its targets made from the simulator's object maps.
 
 * class: each output cell's class *fractions* (of its input pixels) as a soft target of a
-  cross-entropy, so that probability × the cell's pixels is the visible area the cell holds (an objects
-  head: the fractions of the library's objects, ``OBJECT_IDS``);
+  cross-entropy, so that probability × the cell's pixels is the visible area the cell holds;
 * votes: for every cell showing an object, the offset from the cell to the centre of the visible
   pixels of the object covering most of it, weighted by that share (smooth L1, in cells), as Panoptic-DeepLab regresses instance centres;
 * density: every countable object (≥ 20 visible px in the render) spreads a unit mass over its visible
@@ -62,8 +61,8 @@ def perception_targets(object_map: torch.Tensor, object_classes: torch.Tensor, v
 
 
 class PerceptionLoss(nn.Module):
-    """TensorDict [B] (``OBJECT_MAP``, ``OBJECT_CLASSES``, ``FRAME_VISIBLE``; ``OBJECT_IDS`` for an objects head)
-    and the model's standardised inputs → losses, the class accuracy of object cells and the density's count error. ``model``: a
+    """TensorDict [B] (``OBJECT_MAP``, ``OBJECT_CLASSES``, ``FRAME_VISIBLE``) and the model's standardised
+    inputs → losses, the class accuracy of object cells and the density's count error. ``model``: a
     ``CountingPerception``."""
 
     def __init__(self, model, vote_weight: float = 0.5, density_weight: float = 1.0):
@@ -75,21 +74,19 @@ class PerceptionLoss(nn.Module):
     def forward(self, batch: TensorDict, inputs: torch.Tensor) -> TensorDict:
         logits, votes, density = self.model(inputs)
         classes, visible = batch.get(keys.OBJECT_CLASSES), batch.get(keys.FRAME_VISIBLE).float()
-        labels = classes if self.model.objects is None else batch.get(keys.OBJECT_IDS)
-        frac, offsets, weight, target = perception_targets(batch.get(keys.OBJECT_MAP), labels, visible,
-                                                           self.model.head_channels, self.model.out_size)
+        frac, offsets, weight, target = perception_targets(batch.get(keys.OBJECT_MAP), classes, visible,
+                                                           self.model.num_classes, self.model.out_size)
         loss_class = -(frac * F.log_softmax(logits, 1)).sum(1).mean()
-        probs = self.model.class_probs(logits.softmax(1))                                    # [B, K, s, s]
         vote_err = F.smooth_l1_loss(votes, offsets, reduction="none").sum(1)
         loss_votes = (vote_err * weight).sum() / weight.sum().clamp_min(1.0)
         loss_map = (density - target).square().flatten(1).sum(1).mean()
-        expected = (probs[:, 1:] * density).flatten(2).sum(-1)                               # [B, K-1]
+        expected = (logits.softmax(1)[:, 1:] * density).flatten(2).sum(-1)                  # [B, K-1]
         count_err = F.smooth_l1_loss(expected, countable_counts(visible, classes, self.model.num_classes),
                                      reduction="none")
         loss_count = count_err.sum(1).mean()
         with torch.no_grad():
             fg = frac[:, 1:].sum(1) >= 0.5
-            right = (logits.argmax(1) == frac.argmax(1)) & fg          # the head's own labels (objects or classes)
+            right = (logits.argmax(1) == frac.argmax(1)) & fg
             accuracy = right.sum() / fg.sum().clamp_min(1)
         return TensorDict({"loss_class": loss_class, "loss_votes": self.vote_weight * loss_votes,
                            "loss_density": self.density_weight * (loss_map + loss_count),

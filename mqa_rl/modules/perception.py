@@ -28,12 +28,6 @@ class's count is the sum of density × class probability over the image.
 The class head is trained on each cell's class *fractions*, so that a cell's
 probability times its 16 px is the visible area it holds, even for objects of a few cells.
 
-With ``objects`` (the class of every object of the dataset's library) the head tells the library's objects
-apart instead of the classes (1 + M channels; a class's probability is the sum of its objects'). A pile draws
-its objects from the library without replacement, so an object channel is one instance: the pieces of an
-occluded object share it and two touching objects of a class do not, and the ``objects`` readout counts a
-class as its objects whose expected visible area reaches the counting rule's line, without clusters.
-
 A perception file (``save_perception`` / ``load_perception``) holds the weights, the architecture and
 what it was trained on; ``recipes/train_perception.py`` writes it.
 """
@@ -121,7 +115,7 @@ class CountingPerception(nn.Module):
     image (``predict`` then needs it). Votes are in output cells, relative to the cell's centre."""
 
     def __init__(self, num_classes: int, widths=(32, 48, 96, 128), image_size: int = 112, counting: dict | None = None,
-                 detail: int = 0, backbone: str = "unet", depth: bool = False, objects=None):
+                 detail: int = 0, backbone: str = "unet", depth: bool = False):
         super().__init__()
         unknown = set(counting or {}) - set(vote_counting.DEFAULT_COUNTING)
         if unknown:
@@ -137,10 +131,6 @@ class CountingPerception(nn.Module):
         self.depth = bool(depth)
         cin = 4 if self.depth else 3
         self.num_classes = int(num_classes)
-        self.objects = None if objects is None else tuple(int(c) for c in objects)
-        if self.objects is not None and (not self.objects or not all(1 <= c < self.num_classes for c in self.objects)):
-            raise ValueError(f"objects must give every library object's class in 1 … {self.num_classes - 1}, "
-                             f"got {list(self.objects)[:8]}…")
         self.widths = tuple(int(w) for w in widths)
         self.image_size = int(image_size)
         self.backbone = backbone
@@ -159,26 +149,10 @@ class CountingPerception(nn.Module):
         self.up3 = _block(c4 + c3, w3, 1)
         self.up2 = _block(w3 + c2, w2, 1)
         self.up1 = _block(w2 + c1, w1, 1)
-        self.classes = nn.Conv2d(w1, self.head_channels, 1)
+        self.classes = nn.Conv2d(w1, self.num_classes, 1)
         self.votes = nn.Conv2d(w1, 2, 1)
         self.density = nn.Conv2d(w1, 1, 1)
         nn.init.constant_(self.density.bias, DENSITY_BIAS)
-
-    @property
-    def head_channels(self) -> int:
-        """Channels of the class head: 1 + the library's objects with ``objects``, else 1 + the classes."""
-        return self.num_classes if self.objects is None else 1 + len(self.objects)
-
-    @property
-    def object_classes(self) -> torch.Tensor | None:
-        """int64 [1 + M]: the class of each object channel (0: the bin), or None (a class head)."""
-        return None if self.objects is None else torch.tensor((0, *self.objects), dtype=torch.int64)
-
-    def class_probs(self, head_probs: torch.Tensor) -> torch.Tensor:
-        """The class head's probabilities [B, C, s, s] → the classes' [B, K, s, s] (an objects head sums its objects)."""
-        if self.objects is None:
-            return head_probs
-        return vote_counting.class_probs(head_probs, self.object_classes, self.num_classes)
 
     @property
     def out_size(self) -> int:
@@ -232,43 +206,29 @@ class CountingPerception(nn.Module):
                              "image (metres, [B, 1, H, W]) beside its rgb")
         return torch.cat([x, standardise_depth(depth.to(x.device), self.input_size)], 1)
 
-    def heads(self, rgb: torch.Tensor, depth: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """uint8 rgb [B, 3, H, W] (and depth, see ``inputs``) → (the class head's probabilities [B, C, s, s]
-        (``head_channels``), votes [B, 2, s, s], density [B, 1, s, s])."""
-        logits, votes, density = self(self.inputs(rgb, depth))
-        return logits.softmax(1), votes, density
-
     def predict(self, rgb: torch.Tensor, depth: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """uint8 rgb [B, 3, H, W] (and depth, see ``inputs``) → (class probabilities [B, K, s, s], votes
         [B, 2, s, s], density [B, 1, s, s])."""
-        head_probs, votes, density = self.heads(rgb, depth)
-        return self.class_probs(head_probs), votes, density
-
-    def readout_inputs(self, head_probs: torch.Tensor) -> tuple[torch.Tensor, dict]:
-        """The class head's probabilities → (class probabilities, the ``vote_counting`` keyword arguments of this
-        perception: its counting settings and, for an objects head, its object probabilities)."""
-        extra = {} if self.objects is None else {"objects": (head_probs, self.object_classes)}
-        return self.class_probs(head_probs), {**self.counting, **extra}
+        logits, votes, density = self(self.inputs(rgb, depth))
+        return logits.softmax(1), votes, density
 
     def count_features(self, rgb: torch.Tensor, trainable: bool = False, depth: torch.Tensor | None = None) -> torch.Tensor:
         """uint8 rgb [B, 3, H, W] (and depth) → the VQA's per-class count features [B, K, F] (``vote_counting``),
         with this perception's own counting settings; ``trainable``: with gradients (fine-tuning under the VQA)."""
         with torch.set_grad_enabled(trainable and torch.is_grad_enabled()):
-            head_probs, votes, density = (t.float().cpu() for t in self.heads(rgb, depth))
-            probs, settings = self.readout_inputs(head_probs)
+            probs, votes, density = (t.float().cpu() for t in self.predict(rgb, depth))
             read = vote_counting.trainable_count_features if trainable else vote_counting.count_features
-            return read(probs, votes, density, self.cell_px, **settings)
+            return read(probs, votes, density, self.cell_px, **self.counting)
 
     def counts(self, rgb: torch.Tensor, depth: torch.Tensor | None = None) -> torch.Tensor:
         """uint8 rgb [B, 3, H, W] (and depth) → int64 [B, K-1]: the objects of each class (1 … K-1) it counts."""
-        head_probs, votes, density = (t.float().cpu() for t in self.heads(rgb, depth))
-        probs, settings = self.readout_inputs(head_probs)
-        return vote_counting.counts(probs, votes, density, self.cell_px, **settings)
+        probs, votes, density = (t.float().cpu() for t in self.predict(rgb, depth))
+        return vote_counting.counts(probs, votes, density, self.cell_px, **self.counting)
 
     def config(self) -> dict:
         return {"num_classes": self.num_classes, "widths": list(self.widths), "image_size": self.image_size,
                 "counting": dict(self.counting), "detail": self.detail_width, "backbone": self.backbone,
-                "depth": self.depth, "objects": None if self.objects is None else list(self.objects)}
+                "depth": self.depth}
 
 
 def save_perception(model: CountingPerception, path: str | Path, meta: dict) -> Path:

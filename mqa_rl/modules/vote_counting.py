@@ -14,12 +14,6 @@ mass reaches ``min_px`` (20: ``COUNTABLE_PX``, the perfect counter's rule).
 The density readout (``readout="density"``) needs no clusters: a class's expected count is the sum over
 cells of density × class probability, and the count rounds it up from ``round_at`` (0.5: to the nearest).
 
-The objects readout (``readout="objects"``, a perception whose head tells the library's objects apart) needs
-no clusters either: a pile draws its objects from the library without replacement, so each object channel is
-one instance, its pieces share the channel and two touching objects of a class do not. An object's mass is its
-channel's expected visible area (probability × the cell's pixels over cells at or above ``min_prob``), and it
-counts from ``min_px``, as a vote cluster does.
-
 ``count_features`` gives, per class, what the VQA head reads: the count under the readout (one-hot,
 0 … ``MAX_COUNT``, the last bin meaning "that many or more"), the ``TOP`` largest cluster masses
 (log-scaled, so that a head can set its own threshold), the class's visible area and its expected count
@@ -46,7 +40,7 @@ PEAK_FLOOR = 4.0           # a peak needs this much smoothed vote mass (px) to b
 # the non-maximum suppression window (cells), the class probability below which a cell does not vote,
 # and the cluster mass (px) from which an object counts (the rule's 20 px, or what the predicted masses
 # need to meet it); and which readout counts (``READOUTS``) with the density's rounding point.
-READOUTS = ("votes", "density", "objects")
+READOUTS = ("votes", "density")
 DEFAULT_COUNTING = {"radius": 2.5, "nms": 5, "min_prob": 0.05, "min_px": COUNTABLE_PX, "readout": "votes", "round_at": 0.5}
 
 
@@ -84,24 +78,6 @@ def clusters(probs: torch.Tensor, votes: torch.Tensor, cell_px: float, *, radius
     return out
 
 
-def object_masses(object_probs: torch.Tensor, object_classes: torch.Tensor, num_classes: int, cell_px: float, *,
-                  min_prob: float = DEFAULT_COUNTING["min_prob"]):
-    """``clusters``' layout from an objects head: per image and class (1 … K-1) its library objects' masses (px).
-
-    object_probs [B, 1 + M, s, s] (channel 0 the bin), object_classes int64 [1 + M]: each channel's class."""
-    p = object_probs[:, 1:]
-    mass = (p * (p >= min_prob)).flatten(2).sum(-1) * cell_px                    # [B, M]
-    owner = object_classes[1:].cpu()
-    return [[mass[i, owner == c].cpu() for c in range(1, num_classes)] for i in range(mass.shape[0])]
-
-
-def class_probs(object_probs: torch.Tensor, object_classes: torch.Tensor, num_classes: int) -> torch.Tensor:
-    """[B, K, s, s]: each class's probability, the sum of its objects' (``object_masses``' arguments)."""
-    b, _, h, w = object_probs.shape
-    out = object_probs.new_zeros(b, num_classes, h, w)
-    return out.index_add(1, object_classes.to(object_probs.device), object_probs)
-
-
 def expected_counts(probs: torch.Tensor, density: torch.Tensor) -> torch.Tensor:
     """float [B, K-1]: the density's mass of each class (1 … K-1): Σ over cells of density × class probability."""
     return (probs[:, 1:] * density).flatten(2).sum(-1)
@@ -114,31 +90,18 @@ def density_counts(expected: torch.Tensor, round_at: float = DEFAULT_COUNTING["r
 
 def counts(probs: torch.Tensor, votes: torch.Tensor, density: torch.Tensor, cell_px: float, *,
            readout: str = DEFAULT_COUNTING["readout"], min_px: float = COUNTABLE_PX,
-           round_at: float = DEFAULT_COUNTING["round_at"], objects=None, **cluster_settings) -> torch.Tensor:
-    """int64 [B, K-1]: objects of each class (classes 1 … K-1) under ``readout``: vote clusters (or, with
-    ``objects`` = (object probabilities, their classes), library objects) holding ≥ ``min_px`` visible px,
-    or the rounded density mass."""
-    masses = _masses(readout, probs, votes, cell_px, objects, **cluster_settings) if readout != "density" else None
+           round_at: float = DEFAULT_COUNTING["round_at"], **cluster_settings) -> torch.Tensor:
+    """int64 [B, K-1]: objects of each class (classes 1 … K-1) under ``readout``: vote clusters holding
+    ≥ ``min_px`` visible px, or the rounded density mass."""
+    masses = clusters(probs, votes, cell_px, **cluster_settings) if readout == "votes" else None
     return read_counts(readout, expected_counts(probs, density), masses, min_px, round_at)
-
-
-def _masses(readout: str, probs, votes, cell_px, objects, **cluster_settings):
-    """The objects' masses: ``object_masses`` of an objects head for ``readout="objects"``, else the vote ``clusters``."""
-    if readout != "objects":
-        return clusters(probs, votes, cell_px, **cluster_settings)
-    if objects is None:
-        raise ValueError("readout='objects' needs a perception whose head tells the library's objects apart "
-                         "(trained with model.objects=true)")
-    object_probs, object_classes = objects
-    return object_masses(object_probs, object_classes, probs.shape[1], cell_px,
-                         min_prob=cluster_settings.get("min_prob", DEFAULT_COUNTING["min_prob"]))
 
 
 def read_counts(readout: str, expected: torch.Tensor, masses, min_px: float, round_at: float) -> torch.Tensor:
     """int64 [B, K-1] under ``readout`` from the density's expected counts or the vote clusters' masses."""
     if readout == "density":
         return density_counts(expected, round_at)
-    if readout not in READOUTS:
+    if readout != "votes":
         raise ValueError(f"unknown readout {readout!r}; known: {list(READOUTS)}")
     return counts_of(masses, min_px)
 
@@ -150,20 +113,20 @@ def counts_of(masses, min_px: float = COUNTABLE_PX) -> torch.Tensor:
 
 def count_features(probs: torch.Tensor, votes: torch.Tensor, density: torch.Tensor, cell_px: float, *,
                    readout: str = DEFAULT_COUNTING["readout"], min_px: float = COUNTABLE_PX,
-                   round_at: float = DEFAULT_COUNTING["round_at"], objects=None, **cluster_settings) -> torch.Tensor:
-    """float [B, K, FEATURES] of the perception's output: ``features_from_masses`` of its vote clusters (of
-    its library objects, with ``objects``: see ``counts``), with each class's area the sum of its
-    probabilities (px), its expected count from the density, and the count under ``readout``."""
+                   round_at: float = DEFAULT_COUNTING["round_at"], **cluster_settings) -> torch.Tensor:
+    """float [B, K, FEATURES] of the perception's output: ``features_from_masses`` of its vote clusters,
+    with each class's area the sum of its probabilities (px), its expected count from the density, and
+    the count under ``readout``."""
     area = probs[:, 1:].flatten(2).sum(-1) * cell_px                               # [B, K-1] px
     expected = expected_counts(probs, density)
-    masses = _masses(readout, probs, votes, cell_px, objects, **cluster_settings)
+    masses = clusters(probs, votes, cell_px, **cluster_settings)
     counted = read_counts(readout, expected, masses, min_px, round_at)
     return features_from_masses(masses, area, min_px, expected=expected, counted=counted)
 
 
 def trainable_count_features(probs: torch.Tensor, votes: torch.Tensor, density: torch.Tensor, cell_px: float, *,
                              min_px: float = COUNTABLE_PX, round_at: float = DEFAULT_COUNTING["round_at"],
-                             objects=None, **settings) -> torch.Tensor:
+                             **settings) -> torch.Tensor:
     """``count_features`` in the forward pass, with straight-through gradients to the class probabilities and
     the density: the count one-hot passes the gradient of a soft one-hot (linear between the two counts the
     expected count lies between, on the density's rounding scale), the area and the expected count their own,
@@ -171,8 +134,7 @@ def trainable_count_features(probs: torch.Tensor, votes: torch.Tensor, density: 
     not differentiable). Equal to ``count_features`` in value, so a frozen head starts fine-tuning exactly."""
     with torch.no_grad():
         hard = count_features(probs.detach(), votes.detach(), density.detach(), cell_px, min_px=min_px,
-                              round_at=round_at, objects=None if objects is None else (objects[0].detach(), objects[1]),
-                              **settings)
+                              round_at=round_at, **settings)
     area = probs[:, 1:].flatten(2).sum(-1) * cell_px
     expected = expected_counts(probs, density)
     position = (expected + 0.5 - round_at).clamp(0.0, float(MAX_COUNT))          # its rounding gives the count

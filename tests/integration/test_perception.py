@@ -50,57 +50,6 @@ def test_perfect_class_fractions_and_votes_count_instances_not_blobs():
         vote_counting.counts(frac, offsets, density, 16.0, readout="blobs")
 
 
-def test_an_objects_head_counts_an_occluded_objects_pieces_once_and_two_touching_objects_twice():
-    """With the library's objects as the head's channels (a pile holds each at most once), the perfect
-    fractions count every class exactly without clusters; their class sums are the class fractions."""
-    omap, classes, visible = synthetic_frame()
-    object_classes = torch.tensor([0, 3, 3, 3, 5, 5, 7])            # channel → class (0: the bin)
-    ids = torch.zeros(50, dtype=torch.int64)
-    ids[:5] = torch.tensor([1, 2, 4, 6, 3])                           # slots' library objects (class 3, 3, 5, 7, 3)
-    frac, offsets, _, density = perception_targets(omap[None], ids[None], visible[None], 7, 56)
-    class_frac = perception_targets(omap[None], classes[None], visible[None], K, 56)[0]
-    assert torch.allclose(vote_counting.class_probs(frac, object_classes, K), class_frac)
-    masses = vote_counting.object_masses(frac, object_classes, K, 16.0)
-    assert masses[0][2].tolist() == pytest.approx([float(visible[0]), float(visible[1]), float(visible[4])])
-    counted = vote_counting.counts(class_frac, offsets, density, 16.0, readout="objects", objects=(frac, object_classes))
-    assert counted[0].tolist() == countable_counts(visible[None], classes[None], K)[0].long().tolist()
-    with pytest.raises(ValueError, match="model.objects=true"):       # a class head has no objects to read
-        vote_counting.counts(class_frac, offsets, density, 16.0, readout="objects")
-
-
-def test_an_objects_perception_learns_reads_and_round_trips(tmp_path):
-    torch.manual_seed(0)
-    omap, classes, visible = synthetic_frame()
-    ids = torch.zeros(50, dtype=torch.int64)
-    ids[:5] = torch.tensor([1, 2, 4, 6, 3])
-    model = CountingPerception(K, widths=(8, 8, 16, 16), objects=[3, 3, 3, 5, 5, 7],
-                               counting={"readout": "objects", "min_prob": 0.0})
-    assert model.head_channels == 7 and model.classes.out_channels == 7
-    loss = PerceptionLoss(model)
-    rgb = torch.zeros(2, 3, 112, 112)
-    rgb[:, 0] = omap.float() / 5.0 - 0.5
-    batch = TensorDict({keys.OBJECT_MAP: omap.expand(2, -1, -1), keys.OBJECT_CLASSES: classes.expand(2, -1),
-                        keys.OBJECT_IDS: ids.expand(2, -1), keys.FRAME_VISIBLE: visible.expand(2, -1)}, batch_size=[2])
-    optim = torch.optim.Adam(model.parameters(), lr=3e-3)
-    first = float(loss.total(loss(batch, rgb)).detach())
-    for _ in range(60):
-        total = loss.total(loss(batch, rgb))
-        optim.zero_grad()
-        total.backward()
-        optim.step()
-    assert float(total.detach()) < 0.4 * first
-    img = torch.randint(0, 255, (2, 3, 224, 224), dtype=torch.uint8)
-    probs, _, _ = model.eval().predict(img)
-    assert probs.shape == (2, K, 56, 56) and torch.allclose(probs.sum(1), torch.ones(2, 56, 56), atol=1e-5)
-    loaded, _ = load_perception(save_perception(model, tmp_path / "objects.pt", {"command": "test"}))
-    assert loaded.objects == (3, 3, 3, 5, 5, 7) and torch.equal(loaded.counts(img), model.counts(img))
-    features = loaded.count_features(img)
-    assert features.shape == (2, K, vote_counting.FEATURES)
-    assert torch.allclose(loaded.count_features(img, trainable=True), features, atol=1e-5)
-    with pytest.raises(ValueError, match="every library object's class"):
-        CountingPerception(K, objects=[3, K])
-
-
 def test_the_density_holds_a_unit_mass_per_countable_object_only():
     omap, classes, visible = synthetic_frame()
     *_, density = perception_targets(omap[None], classes[None], visible[None], K, 56)
@@ -269,12 +218,6 @@ def test_frames_perception_and_counting_vqa_recipes_end_to_end(small_dataset, sp
     with_depth = train.train(compose_recipe_config("train_perception", [              # the depth arm of the ablation
         *(a for a in targs if not a.startswith("out_dir=")), "train.steps=2", "model.depth=true", f"out_dir={tmp_path / 'rgbd'}"]))
     assert load_perception(with_depth["perception"])[0].depth
-    objects = train.train(compose_recipe_config("train_perception", [                  # the objects head
-        *(a for a in targs if not a.startswith("out_dir=")), "train.steps=2", "model.objects=true",
-        f"init_from={out / 'perception.pt'}", f"out_dir={tmp_path / 'objects'}"]))
-    objects_model, objects_meta = load_perception(objects["perception"])
-    assert objects_model.objects == tuple(1 + small_dataset.classes.index(c) for c, _ in small_dataset.library)
-    assert "val/objects_count_accuracy" in objects_meta["val"]
     chosen = load_perception(out / "perception.pt")[1]["counting_calibration"]["chosen"]
     assert load_perception(out / "perception.pt")[0].counting == chosen       # the file counts with what was chosen
 
