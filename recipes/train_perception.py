@@ -55,6 +55,8 @@ FRAME_KEYS = (keys.RGB, keys.OBJECT_MAP, keys.OBJECT_CLASSES, keys.FRAME_VISIBLE
 CALIBRATION_GRID = {"radius": (2.5, 4.0), "nms": (5, 9), "min_prob": (0.05, 0.3), "min_px": (12, 16, 20, 28, 36),
                     "round_at": (0.3, 0.4, 0.5, 0.6, 0.7)}
 COMMAND = "python recipes/train_perception.py"
+# the convolutions that read the input image (a depth perception's read a fourth channel)
+STEMS = ("down.0.0.weight", "detail.0.0.weight")
 
 
 def check_config(cfg: DictConfig) -> None:
@@ -141,10 +143,22 @@ def calibrate_file(path: Path, val, device) -> dict:
 
 
 def init_weights(model: CountingPerception, path: str) -> None:
-    """Start from a perception file's weights (same architecture); heads it lacks keep their initialisation."""
+    """Start from a perception file's weights (same architecture); heads it lacks keep their initialisation,
+    and a depth perception started from an rgb file gets its stems' rgb weights with the depth channel's at zero
+    (so it starts exactly where the rgb file stands)."""
     blob = load_versioned(path, PERCEPTION_FORMAT, PERCEPTION_VERSION, what="perception file (init_from)",
                           hint="name a perception.pt of recipes/train_perception.py")
-    missing, unexpected = model.load_state_dict(blob["state_dict"], strict=False)
+    state = dict(blob["state_dict"])
+    own = model.state_dict()
+    for name in STEMS:
+        if name in state and name in own and state[name].shape[1] == 3 and own[name].shape[1] == 4:
+            state[name] = torch.cat([state[name], torch.zeros_like(state[name][:, :1])], 1)
+    try:
+        missing, unexpected = model.load_state_dict(state, strict=False)
+    except RuntimeError as error:              # a tensor of another shape (widths, a depth file into an rgb net)
+        raise ValueError(f"init_from={path} does not fit model.widths={list(model.widths)}, model.depth={model.depth} "
+                         f"({str(error).splitlines()[1].strip() if len(str(error).splitlines()) > 1 else error}): "
+                         f"match the architecture it was trained with") from None
     if unexpected or any(not k.startswith(("density.", "detail.")) for k in missing):
         raise ValueError(f"init_from={path} does not fit model.widths={list(model.widths)}, model.detail={model.detail_width}, "
                          f"model.backbone={model.backbone} "

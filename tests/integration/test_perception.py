@@ -328,3 +328,23 @@ def test_a_depth_perception_reads_the_depth_image_and_asks_for_it(tmp_path):
     loaded, _ = load_perception(save_perception(model, tmp_path / "p.pt", {}))
     assert loaded.depth and torch.equal(loaded.counts(rgb, pile), model.counts(rgb, pile))
     assert not CountingPerception(K, widths=(8, 8, 16, 16)).depth                  # rgb only by default
+
+
+def test_a_depth_perception_started_from_an_rgb_file_starts_where_it_stands(tmp_path):
+    """init_from an rgb file: the stem's rgb weights carried over, the depth channel's at zero, so the depth
+    perception's outputs equal the rgb file's until training moves them."""
+    from conftest import load_recipe
+
+    torch.manual_seed(0)
+    rgb_model = CountingPerception(K, widths=(8, 8, 16, 16)).eval()
+    path = save_perception(rgb_model, tmp_path / "rgb.pt", {})
+    depth_model = CountingPerception(K, widths=(8, 8, 16, 16), depth=True)
+    load_recipe("train_perception").init_weights(depth_model, str(path))
+    rgb = torch.randint(0, 255, (2, 3, 224, 224), dtype=torch.uint8)
+    depth = torch.rand(2, 1, 224, 224) + 1.5
+    for a, b in zip(rgb_model.predict(rgb), depth_model.eval().predict(rgb, depth)):
+        assert torch.equal(a, b)
+    assert depth_model.down[0][0].weight[:, 3].abs().sum() == 0
+    with pytest.raises(ValueError, match="does not fit"):                     # not the other way round
+        load_recipe("train_perception").init_weights(CountingPerception(K, widths=(8, 8, 16, 16)),
+                                                     str(save_perception(depth_model, tmp_path / "d.pt", {})))
