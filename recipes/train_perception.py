@@ -155,14 +155,13 @@ def init_weights(model: CountingPerception, path: str) -> None:
             state[name] = torch.cat([state[name], torch.zeros_like(state[name][:, :1])], 1)
     try:
         missing, unexpected = model.load_state_dict(state, strict=False)
+        shapes = ""
     except RuntimeError as error:              # a tensor of another shape (widths, a depth file into an rgb net)
-        raise ValueError(f"init_from={path} does not fit model.widths={list(model.widths)}, model.depth={model.depth} "
-                         f"({str(error).splitlines()[1].strip() if len(str(error).splitlines()) > 1 else error}): "
-                         f"match the architecture it was trained with") from None
-    if unexpected or any(not k.startswith(("density.", "detail.")) for k in missing):
+        missing, unexpected, shapes = [], [], f"; {str(error).strip().splitlines()[-1].strip()}"
+    if shapes or unexpected or any(not k.startswith(("density.", "detail.")) for k in missing):
         raise ValueError(f"init_from={path} does not fit model.widths={list(model.widths)}, model.detail={model.detail_width}, "
-                         f"model.backbone={model.backbone} "
-                         f"(missing {missing[:4]}, unexpected {unexpected[:4]}): match the architecture it was trained with")
+                         f"model.backbone={model.backbone}, model.depth={model.depth} "
+                         f"(missing {missing[:4]}, unexpected {unexpected[:4]}{shapes}): match the architecture it was trained with")
     print(f"started from {path} (new heads: {sorted({k.split('.')[0] for k in missing}) or 'none'})")
 
 
