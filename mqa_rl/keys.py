@@ -83,6 +83,7 @@ FRAME_VISIBLE = "visible_area"                # under FIRST / LAST: float32 [K] 
 FRAME_FULL = "full_area"                      # under FIRST / LAST: float32 [K] A_t
 OBJECT_MAP = "object_map"                     # under FIRST / LAST: uint8 [H, W] 0 = bin, 1 + the object's slot (scene order)
 CLASS_MAP = "class_map"                       # pretraining frames: uint8 [H, W] 0 = bin, 1 + index into MQADataset.classes
+SLOT_AREA = "slot_area"                       # perception crops: float32 [50] pixels of each slot in the uncropped object map
 OBJECT_CLASSES = "object_classes"               # perception frames: int64 [K] 1 + index into MQADataset.classes of each scene slot, 0 = empty
 CLASS_CELLS = "class_cells"                   # push-trunk pretraining frames: float16 [1 + classes, GRID, GRID] class fractions per action-grid cell (SapienBinEnv.class_cells)
 

@@ -27,6 +27,7 @@ from pathlib import Path
 import hydra
 import numpy as np
 import torch
+import torch.nn.functional as F
 from omegaconf import DictConfig, OmegaConf
 from tensordict import TensorDict
 from tqdm import tqdm
@@ -34,6 +35,7 @@ from tqdm import tqdm
 from mqa_rl import keys
 from mqa_rl.collectors.perception_frames import DEPTH_SCHEMA, load_frames
 from mqa_rl.collectors.store import read_meta
+from mqa_rl.envs.sapien_bin import MAX_OBJECTS
 from mqa_rl.files import load_versioned, write_atomic
 from mqa_rl.losses.perception import PerceptionLoss, countable_counts
 from mqa_rl.modules import vote_counting
@@ -67,6 +69,10 @@ def check_config(cfg: DictConfig) -> None:
     if t.lr <= 0 or t.warmup_steps < 0:
         raise ValueError(f"train.lr ({t.lr}) must be > 0 and train.warmup_steps ({t.warmup_steps}) ≥ 0")
     check_backbone(cfg.model.backbone, cfg.model.detail, cfg.model.imagenet, cfg.model.depth)   # before any frame is loaded
+    full = input_size(cfg.model.image_size, cfg.model.detail, cfg.model.backbone)
+    if t.crop and (cfg.model.detail or cfg.model.backbone != "unet" or t.crop % 16 or not 32 <= t.crop < full):
+        raise ValueError(f"train.crop={t.crop}: crops are for the plain U-Net (model.detail=0, model.backbone=unet), a "
+                         f"multiple of 16 from 32 up to below the frames' {full} px; 0 trains on whole frames")
     for store in cfg.frames.stores:
         read_meta(store)                     # FileNotFoundError naming the recipe that collects it
 
@@ -176,6 +182,22 @@ def augment(*images: torch.Tensor) -> tuple[torch.Tensor, ...]:
     return out
 
 
+def random_crop(size: int, *images: torch.Tensor) -> tuple[tuple[torch.Tensor, ...], torch.Tensor]:
+    """The same random ``size`` × ``size`` window of each frame's images (rgb, object map, depth: [B, ..., S, S];
+    the object map the second), at even offsets so that its output cells are the whole frame's, and each slot's
+    pixels in the uncropped object map [B, 50] (``keys.SLOT_AREA``: a cut object keeps its whole mass per cell)."""
+    omap = images[1]
+    b, full = omap.shape[0], omap.shape[-1]
+    slot_area = F.one_hot(omap.long().flatten(1), MAX_OBJECTS + 1).sum(1)[:, 1:].float()
+    ys = torch.randint((full - size) // 2 + 1, (b,)) * 2
+    xs = torch.randint((full - size) // 2 + 1, (b,)) * 2
+    rows = (ys[:, None] + torch.arange(size))[:, :, None]           # [B, size, 1]
+    cols = (xs[:, None] + torch.arange(size))[:, None, :]           # [B, 1, size]
+    batch = torch.arange(b)[:, None, None]
+    crops = tuple(x[batch, ..., rows, cols].movedim(3, 1) if x.dim() == 4 else x[batch, rows, cols] for x in images)
+    return crops, slot_area
+
+
 def train(cfg: DictConfig) -> dict:
     check_config(cfg)
     out = Path(cfg.out_dir)
@@ -272,11 +294,14 @@ def _train(cfg: DictConfig, out: Path) -> dict:
             images = (rgb_all[idx], omap_all[idx]) + ((depth_all[idx],) if depth_all is not None else ())
             if cfg.train.augment:
                 images = augment(*images)
+            batch = {keys.OBJECT_CLASSES: cls_all[idx].to(device), keys.FRAME_VISIBLE: vis_all[idx].to(device)}
+            if cfg.train.crop:
+                images, slot_area = random_crop(int(cfg.train.crop), *images)
+                batch[keys.SLOT_AREA] = slot_area.to(device)
             rgb, omap = images[:2]
             depth = images[2].to(device) if depth_all is not None else None
-            batch = {keys.OBJECT_MAP: omap.to(device), keys.OBJECT_CLASSES: cls_all[idx].to(device),
-                     keys.FRAME_VISIBLE: vis_all[idx].to(device)}
-            td = loss(TensorDict(batch, batch_size=[len(idx)]), model.inputs(rgb.to(device), depth))
+            batch[keys.OBJECT_MAP] = omap.to(device)
+            td = loss(TensorDict(batch, batch_size=[len(idx)]), model.inputs(rgb.to(device), depth, crop=bool(cfg.train.crop)))
             optim.zero_grad()
             loss.total(td).backward()
             torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.train.max_grad_norm)

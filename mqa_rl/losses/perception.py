@@ -8,6 +8,11 @@
   cells (squared error summed over an image's cells), and each class's count read from it (density ×
   class probability, summed) meets the perfect counter's count of that class (smooth L1): the
   measured quantity itself is a loss term.
+
+Trained on crops of a frame (``recipes/train_perception.py train.crop``), an object cut by the crop keeps the mass
+per cell of the whole frame (its unit over its pixels in the *uncropped* map, ``SLOT_AREA``), and each class's count
+target is the share of its countable objects' pixels inside the crop: the targets of a crop are the crop of the
+whole frame's targets.
 """
 
 from __future__ import annotations
@@ -29,12 +34,21 @@ def countable_counts(visible_area: torch.Tensor, object_classes: torch.Tensor, n
     return torch.einsum("bn,bnk->bk", countable, F.one_hot(object_classes, num_classes).float())[:, 1:]
 
 
+def crop_counts(visible_area: torch.Tensor, object_classes: torch.Tensor, num_classes: int, inside: torch.Tensor,
+                slot_area: torch.Tensor) -> torch.Tensor:
+    """float [B, K-1]: ``countable_counts`` of a crop: each countable object weighs the share of its pixels that
+    lie inside the crop (``inside`` / ``slot_area``: pixels of each slot [B, 50] in the crop / in the whole map)."""
+    countable = (visible_area >= COUNTABLE_PX).float() * inside / slot_area.clamp_min(1.0)
+    return torch.einsum("bn,bnk->bk", countable, F.one_hot(object_classes, num_classes).float())[:, 1:]
+
+
 def perception_targets(object_map: torch.Tensor, object_classes: torch.Tensor, visible_area: torch.Tensor,
-                       num_classes: int, out_size: int):
+                       num_classes: int, out_size: int, slot_area: torch.Tensor | None = None):
     """(class fractions [B, K, s, s], offsets [B, 2, s, s], vote weight [B, s, s]: the share of the
     cell its main object covers, density [B, 1, s, s]: the countable objects' unit masses over their
     cells) from object maps uint8 [B, S, S] (0 = bin, 1 + slot), slot classes int64 [B, 50] and visible
-    render areas [B, 50]."""
+    render areas [B, 50]. ``slot_area`` [B, 50]: each slot's pixels in the uncropped map when ``object_map`` is a crop
+    (a cut object's cells keep the whole object's mass per cell); None: the map is the whole frame."""
     b, size = object_map.shape[0], object_map.shape[-1]
     pool = size // out_size
     omap = object_map.long()
@@ -55,13 +69,14 @@ def perception_targets(object_map: torch.Tensor, object_classes: torch.Tensor, v
     tx = torch.gather(cx, 1, owner.flatten(1)).view_as(share) - grid[None, :]
     weight = share                                                                    # 0 where no object shows
     countable = torch.cat([torch.zeros_like(visible_area[:, :1]), visible_area], 1) >= COUNTABLE_PX   # [B, 51]
-    unit = countable.float() * pool * pool / area.clamp_min(1.0)                      # mass per cell it fills
+    whole = area if slot_area is None else torch.cat([area[:, :1], slot_area.float()], 1)
+    unit = countable.float() * pool * pool / whole.clamp_min(1.0)                     # mass per cell it fills
     density = torch.einsum("bnyx,bn->byx", slot_frac, unit).unsqueeze(1)
     return class_frac, torch.stack([ty, tx], 1), weight, density
 
 
 class PerceptionLoss(nn.Module):
-    """TensorDict [B] (``OBJECT_MAP``, ``OBJECT_CLASSES``, ``FRAME_VISIBLE``) and the model's standardised
+    """TensorDict [B] (``OBJECT_MAP``, ``OBJECT_CLASSES``, ``FRAME_VISIBLE``; ``SLOT_AREA`` for crops) and the model's standardised
     inputs → losses, the class accuracy of object cells and the density's count error. ``model``: a
     ``CountingPerception``."""
 
@@ -74,15 +89,20 @@ class PerceptionLoss(nn.Module):
     def forward(self, batch: TensorDict, inputs: torch.Tensor) -> TensorDict:
         logits, votes, density = self.model(inputs)
         classes, visible = batch.get(keys.OBJECT_CLASSES), batch.get(keys.FRAME_VISIBLE).float()
-        frac, offsets, weight, target = perception_targets(batch.get(keys.OBJECT_MAP), classes, visible,
-                                                           self.model.num_classes, self.model.out_size)
+        omap, slot_area = batch.get(keys.OBJECT_MAP), batch.get(keys.SLOT_AREA, None)
+        frac, offsets, weight, target = perception_targets(omap, classes, visible, self.model.num_classes,
+                                                           logits.shape[-1], slot_area)     # a crop's cells too
+        if slot_area is None:
+            counted = countable_counts(visible, classes, self.model.num_classes)
+        else:
+            inside = F.one_hot(omap.long().flatten(1), MAX_OBJECTS + 1).sum(1)[:, 1:].float()
+            counted = crop_counts(visible, classes, self.model.num_classes, inside, slot_area)
         loss_class = -(frac * F.log_softmax(logits, 1)).sum(1).mean()
         vote_err = F.smooth_l1_loss(votes, offsets, reduction="none").sum(1)
         loss_votes = (vote_err * weight).sum() / weight.sum().clamp_min(1.0)
         loss_map = (density - target).square().flatten(1).sum(1).mean()
         expected = (logits.softmax(1)[:, 1:] * density).flatten(2).sum(-1)                  # [B, K-1]
-        count_err = F.smooth_l1_loss(expected, countable_counts(visible, classes, self.model.num_classes),
-                                     reduction="none")
+        count_err = F.smooth_l1_loss(expected, counted, reduction="none")
         loss_count = count_err.sum(1).mean()
         with torch.no_grad():
             fg = frac[:, 1:].sum(1) >= 0.5

@@ -195,16 +195,18 @@ class CountingPerception(nn.Module):
             x = up(torch.cat([x, skip], 1))
         return self.classes(x), self.votes(x), F.softplus(self.density(x))
 
-    def inputs(self, rgb: torch.Tensor, depth: torch.Tensor | None = None) -> torch.Tensor:
+    def inputs(self, rgb: torch.Tensor, depth: torch.Tensor | None = None, crop: bool = False) -> torch.Tensor:
         """uint8 rgb [B, 3, H, W] (and, for a perception with ``depth``, float depth [B, 1, H, W] in metres) →
-        the network's standardised input."""
-        x = standardise(rgb, self.input_size)
+        the network's standardised input; ``crop``: the images are crops of frames at ``input_size``, taken as
+        they are (training on crops), not resized to a whole frame."""
+        size = rgb.shape[-1] if crop else self.input_size
+        x = standardise(rgb, size)
         if not self.depth:
             return x
         if depth is None:
             raise ValueError("this perception reads depth too (trained with model.depth=true): pass the frame's depth "
                              "image (metres, [B, 1, H, W]) beside its rgb")
-        return torch.cat([x, standardise_depth(depth.to(x.device), self.input_size)], 1)
+        return torch.cat([x, standardise_depth(depth.to(x.device), size)], 1)
 
     def predict(self, rgb: torch.Tensor, depth: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """uint8 rgb [B, 3, H, W] (and depth, see ``inputs``) → (class probabilities [B, K, s, s], votes

@@ -9,7 +9,7 @@ from tensordict import TensorDict
 from mqa_rl import keys
 from mqa_rl.collectors.perception_frames import check_disjoint, scene_fingerprint
 from mqa_rl.collectors.store import load_records
-from mqa_rl.losses.perception import PerceptionLoss, countable_counts, perception_targets
+from mqa_rl.losses.perception import PerceptionLoss, countable_counts, crop_counts, perception_targets
 from mqa_rl.modules import vote_counting
 from mqa_rl.modules.perception import CountingPerception, load_perception, save_perception
 from mqa_rl.modules.vqa import VQAModel, load_vqa, save_vqa
@@ -58,6 +58,33 @@ def test_the_density_holds_a_unit_mass_per_countable_object_only():
     assert float(density[0, 0, 50, 50]) == 0.0                       # the tiny object's cell (100:102 at 112 px)
     assert float(density[0, 0, 10, 8]) == pytest.approx(1 / 150)    # slot 1: 30 x 20 px at 112 = 150 cells
     assert countable_counts(visible[None], classes[None], K)[0].tolist() == [0, 0, 2, 0, 1, 0, 1]
+
+
+def test_a_crops_targets_are_the_whole_frames_targets_cropped():
+    """Training on crops (train.crop): a cut object keeps the whole frame's mass per cell and counts by the share of
+    its pixels inside, so the crop's density and count targets are the whole frame's, cropped."""
+    from recipes.train_perception import random_crop
+    omap, classes, visible = synthetic_frame()
+    rgb = torch.randint(0, 256, (1, 3, 112, 112), dtype=torch.uint8)
+    frac, _, _, density = perception_targets(omap[None], classes[None], visible[None], K, 56)
+    torch.manual_seed(3)
+    for _ in range(5):
+        (rgb_c, omap_c), slot_area = random_crop(48, rgb, omap[None])
+        assert rgb_c.shape == (1, 3, 48, 48) and omap_c.shape == (1, 48, 48)
+        hits = [(y, x) for y in range(0, 65, 2) for x in range(0, 65, 2) if torch.equal(rgb[0, :, y:y + 48, x:x + 48], rgb_c[0])]
+        assert len(hits) == 1
+        y, x = hits[0]
+        assert torch.equal(omap_c[0], omap[y:y + 48, x:x + 48])
+        frac_c, _, _, density_c = perception_targets(omap_c, classes[None], visible[None], K, 24, slot_area)
+        assert torch.allclose(density_c, density[..., y // 2:y // 2 + 24, x // 2:x // 2 + 24])
+        assert torch.allclose(frac_c, frac[..., y // 2:y // 2 + 24, x // 2:x // 2 + 24])
+        inside = torch.stack([(omap_c[0] == i + 1).sum() for i in range(50)]).float()[None]
+        counted = crop_counts(visible[None], classes[None], K, inside, slot_area)
+        assert float(counted.sum()) == pytest.approx(float(density_c.sum()), rel=1e-5)   # each object's share, once
+        assert 0 <= float(counted.sum()) <= 4 + 1e-5
+    # the whole frame as its own crop: the perfect counter's counts
+    whole = torch.stack([(omap == i + 1).sum() for i in range(50)]).float()[None]
+    assert crop_counts(visible[None], classes[None], K, whole, whole).tolist() == countable_counts(visible[None], classes[None], K).tolist()
 
 
 def test_count_features_put_the_image_row_first_and_one_hot_the_count():
