@@ -63,7 +63,9 @@ def test_the_density_holds_a_unit_mass_per_countable_object_only():
 def test_a_crops_targets_are_the_whole_frames_targets_cropped():
     """Training on crops (train.crop): a cut object keeps the whole frame's mass per cell and counts by the share of
     its pixels inside, so the crop's density and count targets are the whole frame's, cropped."""
-    from recipes.train_perception import random_crop
+    from conftest import load_recipe
+
+    random_crop = load_recipe("train_perception").random_crop
     omap, classes, visible = synthetic_frame()
     rgb = torch.randint(0, 256, (1, 3, 112, 112), dtype=torch.uint8)
     frac, _, _, density = perception_targets(omap[None], classes[None], visible[None], K, 56)
@@ -245,6 +247,11 @@ def test_frames_perception_and_counting_vqa_recipes_end_to_end(small_dataset, sp
     with_depth = train.train(compose_recipe_config("train_perception", [              # the depth arm of the ablation
         *(a for a in targs if not a.startswith("out_dir=")), "train.steps=2", "model.depth=true", f"out_dir={tmp_path / 'rgbd'}"]))
     assert load_perception(with_depth["perception"])[0].depth
+    with pytest.raises(ValueError, match="train.crop=40"):            # a window the U-Net's strides cannot tile
+        train.train(compose_recipe_config("train_perception", [*targs, "train.steps=2", "train.crop=40"]))
+    cropped = train.train(compose_recipe_config("train_perception", [                 # trained on 64-px windows
+        *(a for a in targs if not a.startswith("out_dir=")), "train.steps=2", "train.crop=64", f"out_dir={tmp_path / 'crop'}"]))
+    assert load_perception(cropped["perception"])[0].out_size == 56                  # it reads whole frames
     chosen = load_perception(out / "perception.pt")[1]["counting_calibration"]["chosen"]
     assert load_perception(out / "perception.pt")[0].counting == chosen       # the file counts with what was chosen
 
