@@ -27,7 +27,6 @@ from pathlib import Path
 import hydra
 import numpy as np
 import torch
-import torch.nn.functional as F
 from omegaconf import DictConfig, OmegaConf
 from tensordict import TensorDict
 from tqdm import tqdm
@@ -35,9 +34,8 @@ from tqdm import tqdm
 from mqa_rl import keys
 from mqa_rl.collectors.perception_frames import DEPTH_SCHEMA, load_frames
 from mqa_rl.collectors.store import read_meta
-from mqa_rl.envs.sapien_bin import MAX_OBJECTS
 from mqa_rl.files import load_versioned, write_atomic
-from mqa_rl.losses.perception import PerceptionLoss, countable_counts
+from mqa_rl.losses.perception import PerceptionLoss, countable_counts, slot_pixels
 from mqa_rl.modules import vote_counting
 from mqa_rl.data.dataset import LEVELS
 from mqa_rl.modules.perception import (PERCEPTION_FORMAT, PERCEPTION_VERSION, CountingPerception, check_backbone,
@@ -188,7 +186,7 @@ def random_crop(size: int, *images: torch.Tensor) -> tuple[tuple[torch.Tensor, .
     pixels in the uncropped object map [B, 50] (``keys.SLOT_AREA``: a cut object keeps its whole mass per cell)."""
     omap = images[1]
     b, full = omap.shape[0], omap.shape[-1]
-    slot_area = F.one_hot(omap.long().flatten(1), MAX_OBJECTS + 1).sum(1)[:, 1:].float()
+    slot_area = slot_pixels(omap)
     ys = torch.randint((full - size) // 2 + 1, (b,)) * 2
     xs = torch.randint((full - size) // 2 + 1, (b,)) * 2
     rows = (ys[:, None] + torch.arange(size))[:, :, None]           # [B, size, 1]

@@ -34,6 +34,11 @@ def countable_counts(visible_area: torch.Tensor, object_classes: torch.Tensor, n
     return torch.einsum("bn,bnk->bk", countable, F.one_hot(object_classes, num_classes).float())[:, 1:]
 
 
+def slot_pixels(object_map: torch.Tensor) -> torch.Tensor:
+    """float [B, 50]: each slot's pixels in object maps uint8 [B, S, S] (0 = bin, 1 + slot)."""
+    return F.one_hot(object_map.long().flatten(1), MAX_OBJECTS + 1).sum(1)[:, 1:].float()
+
+
 def crop_counts(visible_area: torch.Tensor, object_classes: torch.Tensor, num_classes: int, inside: torch.Tensor,
                 slot_area: torch.Tensor) -> torch.Tensor:
     """float [B, K-1]: ``countable_counts`` of a crop: each countable object weighs the share of its pixels that
@@ -95,8 +100,7 @@ class PerceptionLoss(nn.Module):
         if slot_area is None:
             counted = countable_counts(visible, classes, self.model.num_classes)
         else:
-            inside = F.one_hot(omap.long().flatten(1), MAX_OBJECTS + 1).sum(1)[:, 1:].float()
-            counted = crop_counts(visible, classes, self.model.num_classes, inside, slot_area)
+            counted = crop_counts(visible, classes, self.model.num_classes, slot_pixels(omap), slot_area)
         loss_class = -(frac * F.log_softmax(logits, 1)).sum(1).mean()
         vote_err = F.smooth_l1_loss(votes, offsets, reduction="none").sum(1)
         loss_votes = (vote_err * weight).sum() / weight.sum().clamp_min(1.0)

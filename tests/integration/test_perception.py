@@ -9,7 +9,7 @@ from tensordict import TensorDict
 from mqa_rl import keys
 from mqa_rl.collectors.perception_frames import check_disjoint, scene_fingerprint
 from mqa_rl.collectors.store import load_records
-from mqa_rl.losses.perception import PerceptionLoss, countable_counts, crop_counts, perception_targets
+from mqa_rl.losses.perception import PerceptionLoss, countable_counts, crop_counts, perception_targets, slot_pixels
 from mqa_rl.modules import vote_counting
 from mqa_rl.modules.perception import CountingPerception, load_perception, save_perception
 from mqa_rl.modules.vqa import VQAModel, load_vqa, save_vqa
@@ -81,6 +81,7 @@ def test_a_crops_targets_are_the_whole_frames_targets_cropped():
         assert torch.allclose(density_c, density[..., y // 2:y // 2 + 24, x // 2:x // 2 + 24])
         assert torch.allclose(frac_c, frac[..., y // 2:y // 2 + 24, x // 2:x // 2 + 24])
         inside = torch.stack([(omap_c[0] == i + 1).sum() for i in range(50)]).float()[None]
+        assert torch.equal(slot_pixels(omap_c), inside)
         counted = crop_counts(visible[None], classes[None], K, inside, slot_area)
         assert float(counted.sum()) == pytest.approx(float(density_c.sum()), rel=1e-5)   # each object's share, once
         assert 0 <= float(counted.sum()) <= 4 + 1e-5
