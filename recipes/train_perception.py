@@ -4,6 +4,8 @@
     python recipes/train_perception.py                                # ~90 min on 2 CPU cores
     python recipes/train_perception.py resume=true                    # continue a killed run
     python recipes/train_perception.py device=cuda train.batch_size=128 model.widths=[48,64,128,192]
+    python recipes/train_perception.py model.image_size=224 train.crop=112 ...    # full resolution at 112-px cost
+                                                                      # (frames: collect_frames.py size=224)
 
 Selects by the counting rule itself, on whole held-out pretraining scenes: the share of (frame, class
 in the scene) pairs whose count (vote clusters or density, whichever is better) equals the number of
