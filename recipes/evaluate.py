@@ -217,7 +217,7 @@ def evaluate(cfg: DictConfig) -> dict:
         ans.prior_right(plan_td, prior), plan_td)
 
     out = Path(cfg.out_dir)
-    head = (f"COUNTING accuracy on the test split ({cfg.questions.name} questions, VQA {cfg.vqa.name}), ± Wilson 95 % "
+    head = (f"COUNTING accuracy on the test split of {cfg.dataset} ({cfg.questions.name} questions, VQA {cfg.vqa.name}), ± Wilson 95 % "
             f"half-width; paper: Table III of Deng et al. 2021")
     t3 = report.table3_markdown(results)
     verdict = report.verdict(results)
