@@ -1,7 +1,7 @@
 """Does the counting perception count the asked class? On every COUNTING question of a split, its count
 of the question's class on the scene's first image (rendered here) against the targets with ≥ 20
 visible pixels (the perfect counter's rule) and against the answer, per level, with 95 % intervals
-that resample whole scenes; and by the smallest countable target's visible area.
+that resample whole scenes, and how often it counts too many or too few; and by the smallest countable target's visible area.
 
     python benchmarks/perception_counts.py --perception checkpoints/vqa_counting/perception.pt
     python benchmarks/perception_counts.py --perception ... --dataset data/mqa_heldout     # fresh piles
@@ -105,10 +105,14 @@ def main() -> None:
         mean, lo, hi, n_scenes = scene_bootstrap_ci95(right, t[m, 1].long())
         answer = float((t[m, 2] == t[m, 4]).double().mean())
         perfect = float((t[m, 3] == t[m, 4]).double().mean())
+        too_many = float((t[m, 2] > t[m, 3]).double().mean())
+        too_few = float((t[m, 2] < t[m, 3]).double().mean())
         report["levels"][level] = {"count_equals_visible": mean, "low": lo, "high": hi, "questions": int(m.sum()),
-                                   "scenes": n_scenes, "count_equals_answer": answer, "perfect_counter_equals_answer": perfect}
+                                   "scenes": n_scenes, "count_equals_answer": answer, "perfect_counter_equals_answer": perfect,
+                                   "too_many": too_many, "too_few": too_few}
         print(f"  {level:6s} {int(m.sum()):4d} questions, {n_scenes:3d} scenes: count = visible {mean:.3f} "
-              f"[{lo:.3f}, {hi:.3f}]  = answer {answer:.3f}  (perfect counter = answer {perfect:.3f})")
+              f"[{lo:.3f}, {hi:.3f}] (too many {too_many:.3f}, too few {too_few:.3f})  = answer {answer:.3f}  "
+              f"(perfect counter = answer {perfect:.3f})")
         if baseline is not None:
             diff = right - (t[m, 6] == t[m, 3]).double()
             d, dlo, dhi, _ = scene_bootstrap_ci95(diff, t[m, 1].long())
