@@ -1,7 +1,8 @@
 """Does the counting perception count the asked class? On every COUNTING question of a split, its count
 of the question's class on the scene's first image (rendered here) against the targets with ≥ 20
 visible pixels (the perfect counter's rule) and against the answer, per level, with 95 % intervals
-that resample whole scenes, and how often it counts too many or too few; and by the smallest countable target's visible area.
+that resample whole scenes, and how often it counts too many or too few; and by the smallest countable
+target's visible area.
 
     python benchmarks/perception_counts.py --perception checkpoints/vqa_counting/perception.pt
     python benchmarks/perception_counts.py --perception ... --dataset data/mqa_heldout     # fresh piles
