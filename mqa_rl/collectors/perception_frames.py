@@ -34,14 +34,13 @@ from tqdm import tqdm
 
 from mqa_rl import keys
 from mqa_rl.collectors.rollouts import episode_seed, object_map
-from mqa_rl.collectors.store import SCENE_OFFSET, EpisodeStore, load_records
+from mqa_rl.collectors.frame_records import SCHEMA
+from mqa_rl.collectors.store import EpisodeStore
 from mqa_rl.data.dataset import LEVELS, MQADataset, dataset_fingerprint
 from mqa_rl.envs import actions
 from mqa_rl.envs.sapien_bin import MAX_OBJECTS, SapienBinEnv
 from mqa_rl.modules.perception import resize_depth
 
-SCHEMA = 2        # 2: frames hold depth
-DEPTH_SCHEMA = 2  # the first schema whose frames hold depth
 
 
 def scene_fingerprint(scene) -> str:
@@ -172,16 +171,4 @@ def collect_perception_frames(out_dir, dataset, *, episodes_per_scene: int, push
     with open(Path(out_dir) / "collect_log.jsonl", "a") as f:
         f.write(json.dumps(summary) + "\n")
     return summary
-
-
-def load_frames(stores, select=None) -> TensorDict:
-    """The frames of one or more stores as one TensorDict [N] in memory; scene ids made distinct per store."""
-    parts = []
-    for i, store in enumerate([stores] if isinstance(stores, (str, Path)) else list(stores)):
-        td = load_records(store, select, require_complete=False)
-        if td.shape[0] == 0:
-            raise ValueError(f"{store} holds no frames yet: run recipes/collect_frames.py")
-        td.set(keys.SCENE, td.get(keys.SCENE) + i * SCENE_OFFSET)
-        parts.append(td)
-    return torch.cat(parts)
 

@@ -23,6 +23,7 @@ from mqa_rl.sim.assets import ObjectAsset
 from mqa_rl.sim.geometry import BinSpec
 
 DIFFICULTIES = {"easy": 20, "medium": 35, "hard": 50}   # objects per scene (paper, Sec. III-C)
+MAX_OBJECTS = max(DIFFICULTIES.values())                 # object slots of every per-object tensor
 WAVE = 1                        # objects released together, as one column (1: poured one by one)
 WAVE_STEPS = 40                 # physics steps between waves (1/6 s)
 DROP_SPREAD = 0.03              # σ of each object's xy offset from the drop point (m)

@@ -47,10 +47,10 @@ from mqa_rl.envs.measurements import overlap_rate
 from mqa_rl.sim.geometry import CameraSpec
 from mqa_rl.sim.pusher import FingerPusher, Pusher, PushResult
 from mqa_rl.sim.pushers import make_pusher
+from mqa_rl.data.scenes import MAX_OBJECTS  # noqa: F401  (re-exported: the env's object slots)
 from mqa_rl.sim.scene import BinWorld, build_world
 from mqa_rl.sim.silhouette import SilhouetteProjector
 
-MAX_OBJECTS = 50
 
 
 def _one_integer(value, name: str, allowed: str) -> int:

@@ -23,7 +23,7 @@ from tensordict import TensorDict
 from torch import nn
 
 from mqa_rl import keys
-from mqa_rl.envs.sapien_bin import MAX_OBJECTS
+from mqa_rl.data.scenes import MAX_OBJECTS
 from mqa_rl.transforms.episode_stats import COUNTABLE_PX
 
 
