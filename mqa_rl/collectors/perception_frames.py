@@ -26,7 +26,6 @@ import multiprocessing as mp
 import time
 from pathlib import Path
 
-import numpy as np
 import torch
 import torch.nn.functional as F
 from tensordict import TensorDict
@@ -40,7 +39,6 @@ from mqa_rl.data.dataset import LEVELS, MQADataset, dataset_fingerprint
 from mqa_rl.envs import actions
 from mqa_rl.envs.sapien_bin import MAX_OBJECTS, SapienBinEnv
 from mqa_rl.modules.perception import resize_depth
-
 
 
 def scene_fingerprint(scene) -> str:
@@ -171,4 +169,3 @@ def collect_perception_frames(out_dir, dataset, *, episodes_per_scene: int, push
     with open(Path(out_dir) / "collect_log.jsonl", "a") as f:
         f.write(json.dumps(summary) + "\n")
     return summary
-

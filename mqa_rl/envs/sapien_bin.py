@@ -42,15 +42,14 @@ from torchrl.envs import EnvBase
 from mqa_rl import keys
 from mqa_rl.data.dataset import MQADataset
 from mqa_rl.data.questions import QUESTION_TYPES
+from mqa_rl.data.scenes import MAX_OBJECTS  # noqa: F401  (re-exported: the env's object slots)
 from mqa_rl.envs import actions
 from mqa_rl.envs.measurements import overlap_rate
 from mqa_rl.sim.geometry import CameraSpec
 from mqa_rl.sim.pusher import FingerPusher, Pusher, PushResult
 from mqa_rl.sim.pushers import make_pusher
-from mqa_rl.data.scenes import MAX_OBJECTS  # noqa: F401  (re-exported: the env's object slots)
 from mqa_rl.sim.scene import BinWorld, build_world
 from mqa_rl.sim.silhouette import SilhouetteProjector
-
 
 
 def _one_integer(value, name: str, allowed: str) -> int:
