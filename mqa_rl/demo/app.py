@@ -69,11 +69,11 @@ def build_app(backend: DemoBackend) -> gr.Blocks:
         session = getattr(request, "session_hash", None) or "anonymous"
         first = True
         for u in backend.run_episode(scene_id, question_id, typed, policy, vqa, int(seed or 0), session):
-            yield _outputs(u, first)
+            yield _outputs(u, first, session)
             first = False
 
-    def _outputs(u: EpisodeUpdate, first: bool):
-        frame = u.frame if u.frame is not None else (None if first else gr.skip())
+    def _outputs(u: EpisodeUpdate, first: bool, session: str):
+        frame = backend.frame_file(session, u.frame) if u.frame is not None else (None if first else gr.skip())
         table = _rows_frame(u.rows, backend.table_columns) if u.rows or first else gr.skip()
         if u.done:
             answer = u.answer if u.answer is not None else None
@@ -88,7 +88,7 @@ def build_app(backend: DemoBackend) -> gr.Blocks:
         """The browser session ended (tab closed): its episode, if one runs, is cancelled by Gradio
         (which returns the env to the pool); its videos go."""
         if request is not None and request.session_hash:
-            backend.files.release(request.session_hash)
+            backend.release(request.session_hash)
 
     default_policy = backend.default_policy
     # the live frames and episode videos Gradio caches are deleted an hour after they were made
@@ -159,5 +159,6 @@ def launch(backend: DemoBackend, host: str = "127.0.0.1", port: int | None = Non
     demo = build_app(backend)
     demo.queue(default_concurrency_limit=backend.cfg.sessions)
     demo.launch(server_name=host, server_port=port, prevent_thread_lock=not block, ssr_mode=False, theme=THEME, css=CSS,
-                allowed_paths=[str(backend.catalog.directory), str(backend.files.root)], show_error=True, **kwargs)
+                allowed_paths=[str(backend.catalog.directory), str(backend.files.root),
+                               str(backend.frames.root)], show_error=True, **kwargs)
     return demo

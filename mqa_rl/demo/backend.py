@@ -7,6 +7,7 @@ checkpoint; ``run_episode`` then streams ``EpisodeUpdate``s for one visitor's ep
 
 from __future__ import annotations
 
+import io
 import logging
 import tempfile
 import time
@@ -17,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from PIL import Image
 
 from mqa_rl.data.dataset import MQADataset
 from mqa_rl.demo.episode import play, table_row, video_frames
@@ -26,6 +28,7 @@ from mqa_rl.demo.scenes import SceneCatalog
 from mqa_rl.demo.sessions import EnvPool, PoolBusy, SessionFiles
 from mqa_rl.demo.vqa_adapter import VQARegistry
 from mqa_rl.envs.video import write_video
+from mqa_rl.files import write_atomic
 from mqa_rl.transforms.mqa_env import make_mqa_env
 
 log = logging.getLogger(__name__)
@@ -88,6 +91,7 @@ class DemoBackend:
         self.default_policy = (chosen or self.policies.trained or self.policies.names)[0]
         self.vqa = VQARegistry(cfg.vqa)
         self.files = SessionFiles(tempfile.mkdtemp(prefix="mqa_demo_"))
+        self.frames = SessionFiles(tempfile.mkdtemp(prefix="mqa_demo_frames_"))
         self.startup_s = time.perf_counter() - t0
         log.info("demo ready in %.1f s: %d scenes, %d policies, %d VQA", self.startup_s, len(self.catalog.cards),
                  len(self.policies.names), len(self.vqa.names))
@@ -166,6 +170,21 @@ class DemoBackend:
         text = f"{truth} · VQA ({vqa}): **{best}** (p = {result[best]:.2f}, {mark})"
         warning = self.vqa.unlearnt_type(vqa, question.type)
         return result, text + (f" · {warning}" if warning else "")
+
+    def frame_file(self, session: str, frame: np.ndarray) -> str:
+        """The live frame as a JPEG file of the session's. Gradio caches an array under the hash of its bytes and
+        writes it in place, so two sessions streaming the same frame at once (same scene, policy and seed) could
+        serve each other a truncated file; a file path it copies under a staging name and renames."""
+        buffer = io.BytesIO()
+        Image.fromarray(np.ascontiguousarray(frame)).save(buffer, "JPEG", quality=90)
+        path = write_atomic(self.frames.folder(session) / f"frame_{uuid.uuid4().hex[:12]}.jpeg", buffer.getvalue())
+        self.frames.keep_last(session, 4)       # Gradio has copied the earlier ones by the time the next is made
+        return str(path)
+
+    def release(self, session: str) -> None:
+        """The browser session ended: its videos and frames go."""
+        self.files.release(session)
+        self.frames.release(session)
 
     def _video(self, last, question, session: str) -> Path | None:
         path = self.files.folder(session) / f"episode_{uuid.uuid4().hex[:8]}.webm"

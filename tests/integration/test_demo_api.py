@@ -154,6 +154,21 @@ def test_two_sessions_at_once_do_not_interfere(served):
     assert backend.pool.free == backend.pool.size
 
 
+def test_live_frames_are_files_of_their_own_session(served):
+    """Two sessions streaming the same frame get files of their own (Gradio caches an array under the hash of its
+    bytes and rewrites it in place: a concurrent download of it could read a truncated file)."""
+    backend, _ = served
+    frame = np.full((32, 32, 3), 127, np.uint8)
+    a, b = backend.frame_file("session_a", frame), backend.frame_file("session_b", frame)
+    assert a != b and Path(a).read_bytes() == Path(b).read_bytes()
+    assert Image.open(a).size == (32, 32)
+    for _ in range(6):
+        backend.frame_file("session_a", frame)
+    assert len(list(Path(a).parent.iterdir())) == 4                    # a long episode keeps only its last frames
+    backend.release("session_a")
+    assert not Path(a).parent.exists() and Path(b).exists()
+
+
 class SlowPusher:
     """Pushes at the bin centre, slowly: an episode long enough to be stopped half-way."""
 
