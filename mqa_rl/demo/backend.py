@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import io
 import logging
+import shutil
 import tempfile
 import time
 import uuid
@@ -107,7 +108,10 @@ class DemoBackend:
                 f"{self.policies.status()}\n\n{self.vqa.status()}")
 
     def close(self) -> None:
+        """The simulators go, and the sessions' videos and frames with them."""
         self.pool.close()
+        for files in (self.files, self.frames):
+            shutil.rmtree(files.root, ignore_errors=True)
 
     # ------------------------------------------------------------------------------ episode
     def resolve_question(self, scene_id: str, question_id: str | None, typed: str | None):

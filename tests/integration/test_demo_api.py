@@ -35,6 +35,7 @@ def served(small_dataset_dir, tmp_path_factory):
     backend, demo, url = start_demo(small_dataset_dir, runs, root / "cache", max_pushes=3, sessions=2)
     yield backend, url
     stop_demo(backend, demo)
+    assert not backend.files.root.exists() and not backend.frames.root.exists()    # nothing left on disk
 
 
 def client(url):
