@@ -7,7 +7,6 @@ checkpoint; ``run_episode`` then streams ``EpisodeUpdate``s for one visitor's ep
 
 from __future__ import annotations
 
-import io
 import logging
 import shutil
 import tempfile
@@ -17,9 +16,9 @@ from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import cv2
 import numpy as np
 import torch
-from PIL import Image
 
 from mqa_rl.data.dataset import MQADataset
 from mqa_rl.demo.episode import play, table_row, video_frames
@@ -179,9 +178,10 @@ class DemoBackend:
         """The live frame as a JPEG file of the session's. Gradio caches an array under the hash of its bytes and
         writes it in place, so two sessions streaming the same frame at once (same scene, policy and seed) could
         serve each other a truncated file; a file path it copies under a staging name and renames."""
-        buffer = io.BytesIO()
-        Image.fromarray(np.ascontiguousarray(frame)).save(buffer, "JPEG", quality=90)
-        path = write_atomic(self.frames.folder(session) / f"frame_{uuid.uuid4().hex[:12]}.jpeg", buffer.getvalue())
+        ok, jpeg = cv2.imencode(".jpg", cv2.cvtColor(frame, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 90])
+        if not ok:
+            raise OSError(f"OpenCV cannot encode a live frame of shape {frame.shape} as JPEG")
+        path = write_atomic(self.frames.folder(session) / f"frame_{uuid.uuid4().hex[:12]}.jpeg", jpeg.tobytes())
         self.frames.keep_last(session, 4)       # Gradio has copied the earlier ones by the time the next is made
         return str(path)
 
