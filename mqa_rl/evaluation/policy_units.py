@@ -24,8 +24,10 @@ from mqa_rl.transforms.mqa_env import make_mqa_env
 # References that read the simulator (never a learned policy), as frozen-policy specs: the least-visible-first
 # oracle, the image teacher (its occluders and directions from visible pixels and depth alone; the students'
 # teacher), and the image teacher whose push is refined by simulating its direction from the 8 neighbouring
-# start cells (the shipped student's).
+# start cells (the shipped student's); and the oracle that serves each target only until it shows the perfect
+# counter's 20 px (what the answer needs: docs/policy.md, "Where, or which").
 ORACLES = {"oracle": {"kind": "privileged", "lookahead": 1},
+           "countable_oracle": {"kind": "privileged", "lookahead": 1, "min_visible_fraction": 0.0},
            "image_teacher": {"kind": "privileged", "lookahead": 1, "order": "visible_first", "geometry": "visible"},
            "refined_teacher": {"kind": "privileged", "lookahead": 1, "order": "visible_first", "geometry": "visible",
                                "refine_radius": 1}}

@@ -179,6 +179,25 @@ def test_the_image_teacher_only_serves_targets_the_image_shows(small_dataset):
     assert served > 0
 
 
+def test_the_countable_oracle_serves_only_targets_below_the_counters_line(small_dataset):
+    """evaluate_policy's ``countable_oracle`` (the ``privileged_countable`` system) serves a target until it shows
+    the perfect counter's 20 px, whatever share of its silhouette that is: a subset of what the oracle serves."""
+    from mqa_rl.evaluation.policy_units import ORACLES
+    from mqa_rl.modules.frozen_policies import make_frozen_policy
+    from mqa_rl.modules.privileged_policy import PrivilegedPushPolicy
+
+    served = 0
+    for env, gt in _hard_scene_truths(small_dataset):
+        countable, _ = make_frozen_policy(ORACLES["countable_oracle"], env, 10)
+        mine = {t for _, (t, _) in countable.candidates(gt)}
+        assert all(gt["target"][t] and gt["visible"][t] < countable.min_visible_px for t in mine)
+        assert mine <= {t for _, (t, _) in PrivilegedPushPolicy(env, lookahead=1).candidates(gt)}
+        served += len(mine)
+        if not mine:
+            assert countable.choose() == actions.STOP
+    assert served > 0
+
+
 def test_stop_margin_teaches_when_the_demonstrator_stops():
     torch.manual_seed(0)
     net = PushQNet(VOCAB, camera_distance=0.9, **SMALL)
