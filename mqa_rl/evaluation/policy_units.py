@@ -33,11 +33,9 @@ ORACLES = {"oracle": {"kind": "privileged", "lookahead": 1},
            "image_teacher": {"kind": "privileged", "lookahead": 1, "order": "visible_first", "geometry": "visible"},
            "refined_teacher": {"kind": "privileged", "lookahead": 1, "order": "visible_first", "geometry": "visible",
                                "refine_radius": 1}}
-# an image policy that learns nothing itself: the countable image teacher's rule on the counting perception's maps
-IMAGE_RULES = {"perceived_countable": {"kind": "perceived", "perception": "checkpoints/vqa_counting/perception.pt"}}
 # the reference that never pushes: the first image is the last (what a policy's pushes are worth beside nothing)
 NO_MANIPULATION = {"kind": "none"}
-POLICIES = ("greedy", "random", "random_masked", "no_manipulation", *ORACLES, *IMAGE_RULES)
+POLICIES = ("greedy", "random", "random_masked", "no_manipulation", *ORACLES)
 
 _ENVS: dict = {}            # this process's env per level: a unit reuses it (local: one process; ray: per actor)
 
@@ -74,8 +72,8 @@ def evaluate_unit(setup: dict, level: str, name: str) -> tuple[dict, list]:
                 videos.append(qmap_episode_frames(rollout, env.base_env.camera, env.base_env.question.text))
     elif name in ("random", "random_masked"):
         policy = RandomMQAPolicy(max_pushes, seed=setup["seed"], masked=name == "random_masked")
-    elif name in ORACLES or name in IMAGE_RULES or name == "no_manipulation":
-        policy, _ = make_frozen_policy({**ORACLES, **IMAGE_RULES}.get(name, NO_MANIPULATION), env.base_env, max_pushes)
+    elif name in ORACLES or name == "no_manipulation":
+        policy, _ = make_frozen_policy(ORACLES.get(name, NO_MANIPULATION), env.base_env, max_pushes)
     else:
         raise ValueError(f"unknown policy {name!r}; choose among {', '.join(POLICIES)}")
     metrics = run_episodes(env, policy, setup["episodes"], max_pushes=max_pushes, simple_threshold=setup["threshold"],

@@ -12,16 +12,13 @@ mapping), frozen: nothing here learns.
                                             in an env with PushMemory(r), as it was trained (``make_mqa_env(push_memory=r)``)
     {kind: privileged, lookahead: 1}        the oracle reference (reads the simulator; see privileged_policy;
                                             order: visible_first, geometry: visible = the image teacher)
-    {kind: perceived, perception: <file>}   the countable image teacher's rule on what the counting perception
-                                            sees (reads the rgb-d image and the question only; perceived_policy)
 
 ``make_frozen_policy(spec, env)`` returns ``(policy, exploration_type)``: ``policy(td)`` writes
 ``action``; run it under ``set_exploration_type(exploration_type)``. ``is_deterministic(spec)``:
 whether every rollout of a question is the same (the env replays bit-identically), in which case a
 collection needs one rollout per question. ``resolve_checkpoint(spec)`` pins a dqn spec to the run's
 newest checkpoint. The policies themselves live in their own modules (``stop_policy``, ``stop_margin``,
-``learned_stop``, ``trained_policy``, ``random_policy``, ``privileged_policy``, ``perceived_policy``); this file only
-maps specs to them.
+``learned_stop``, ``trained_policy``, ``random_policy``, ``privileged_policy``); this file only maps specs to them.
 """
 
 from __future__ import annotations
@@ -33,7 +30,6 @@ from omegaconf import OmegaConf
 from torchrl.envs.utils import ExplorationType
 
 from mqa_rl.modules.learned_stop import LearnedStop
-from mqa_rl.modules.perceived_policy import PerceivedCountablePolicy
 from mqa_rl.modules.privileged_policy import PrivilegedPushPolicy
 from mqa_rl.modules.push_policy import make_explorer
 from mqa_rl.modules.random_policy import RandomMQAPolicy
@@ -42,8 +38,7 @@ from mqa_rl.modules.stop_policy import StopPolicy
 from mqa_rl.modules.trained_policy import load_greedy, newest_run_checkpoint
 from mqa_rl.transforms.push_memory import memory_radius
 
-KINDS = ("random", "random_masked", "none", "dqn", "privileged", "perceived")
-PERCEIVED_OPTIONS = ("perception", "min_mass", "min_region_px")
+KINDS = ("random", "random_masked", "none", "dqn", "privileged")
 PRIVILEGED_OPTIONS = ("min_visible_px", "min_visible_fraction", "max_tries_per_occluder", "lookahead", "order",
                       "geometry", "refine_radius")
 
@@ -64,11 +59,8 @@ def check_spec(spec: Mapping) -> dict:
         if spec.get("push_memory") is not None and not isinstance(spec["push_memory"], int):
             raise ValueError(f"dqn push_memory={spec['push_memory']!r} must be an integer radius in grid cells "
                              f"(negative: no memory) or null (the run's env.push_memory)")
-    if kind == "perceived" and not spec.get("perception"):
-        raise ValueError("a perceived policy needs perception=<a counting perception file, "
-                         "e.g. checkpoints/vqa_counting/perception.pt>")
     unknown = set(spec) - {"kind", "run", "checkpoint", "epsilon", "stop_margin", "stop_critic", "push_memory",
-                           *PRIVILEGED_OPTIONS, *PERCEIVED_OPTIONS}
+                           *PRIVILEGED_OPTIONS}
     if unknown:
         raise ValueError(f"unknown policy option(s) {sorted(unknown)} for kind {kind!r}")
     return spec
@@ -99,7 +91,7 @@ def resolve_checkpoint(spec: Mapping) -> dict:
 
 def is_deterministic(spec: Mapping) -> bool:
     kind = spec["kind"]
-    return kind in ("none", "privileged", "perceived") or (kind == "dqn" and float(spec.get("epsilon", 0.0)) == 0.0)
+    return kind in ("none", "privileged") or (kind == "dqn" and float(spec.get("epsilon", 0.0)) == 0.0)
 
 
 def make_frozen_policy(spec: Mapping, env, max_pushes: int):
@@ -114,10 +106,6 @@ def make_frozen_policy(spec: Mapping, env, max_pushes: int):
     if kind == "privileged":
         options = {k: spec[k] for k in PRIVILEGED_OPTIONS if k in spec}
         return PrivilegedPushPolicy(env, **options), ExplorationType.DETERMINISTIC
-    if kind == "perceived":
-        options = {k: spec[k] for k in PERCEIVED_OPTIONS if k in spec and k != "perception"}
-        return (PerceivedCountablePolicy(spec["perception"], env.dataset.classes, env.dataset.questions, **options),
-                ExplorationType.DETERMINISTIC)
     actor, run_cfg, _ = load_greedy(Path(spec["run"]), spec.get("checkpoint"), env)
     if spec.get("stop_margin") is not None:
         actor = StopMargin(actor, float(spec["stop_margin"]))

@@ -79,10 +79,9 @@ class PrivilegedPushPolicy:
         frac = np.divide(visible, full, out=np.zeros_like(visible, dtype=np.float64), where=full > 0)
         return (visible >= self.min_visible_px) & (frac >= self.min_visible_fraction)
 
-    def choose(self, gt: dict | None = None) -> int:
-        """The action for the env's current state (a push index or ``actions.STOP``); ``gt``: a scene as
-        ``ground_truth()`` describes it, read from elsewhere (``perceived_policy``: from the counting perception)."""
-        gt = self.env.ground_truth() if gt is None else gt
+    def choose(self) -> int:
+        """The action for the env's current state (a push index or ``actions.STOP``)."""
+        gt = self.env.ground_truth()
         key = (gt["question_id"], gt["scene_id"])
         if key != self._episode or int(gt["push_count"]) == 0:
             self._episode, self._tries = key, {}
@@ -122,11 +121,9 @@ class PrivilegedPushPolicy:
 
     def candidates(self, gt: dict) -> list[tuple[int, tuple[int, int]]]:
         """Pushes worth trying, best guess first: for each unrevealed target (least visible first),
-        each object covering it (most pixels first), pushed straight away from it and ±45°. A scene may say which
-        objects count as seen (``counted`` [N] bool) instead of their areas."""
-        seg, masks, ids = gt["seg"], gt.get("masks"), gt["entity_ids"]      # no silhouettes: geometry="visible"
-        counted = gt["counted"] if "counted" in gt else self.revealed(gt["visible"], gt["full"])
-        targets = np.flatnonzero(gt["target"] & ~counted)
+        each object covering it (most pixels first), pushed straight away from it and ±45°."""
+        seg, masks, ids = gt["seg"], gt["masks"], gt["entity_ids"]
+        targets = np.flatnonzero(gt["target"] & ~self.revealed(gt["visible"], gt["full"]))
         if self.geometry == "visible":  # only targets the image shows a part of (one it lacks has no border)
             targets = targets[gt["visible"][targets] > 0]
         seen_frac = gt["visible"][targets] / np.maximum(gt["full"][targets], 1)

@@ -179,19 +179,20 @@ def test_the_image_teacher_only_serves_targets_the_image_shows(small_dataset):
     assert served > 0
 
 
-def test_the_countable_oracle_serves_only_targets_below_the_counters_line(small_dataset):
-    """evaluate_policy's ``countable_oracle`` (the ``privileged_countable`` system) serves a target until it shows
-    the perfect counter's 20 px, whatever share of its silhouette that is: a subset of what the oracle serves."""
+@pytest.mark.parametrize("reference,base", [("countable_oracle", "oracle"), ("countable_image_teacher", "image_teacher")])
+def test_the_countable_references_serve_only_targets_below_the_counters_line(small_dataset, reference, base):
+    """evaluate_policy's ``countable_oracle`` (the ``privileged_countable`` system) and ``countable_image_teacher``
+    serve a target until it shows the perfect counter's 20 px, whatever share of its silhouette that is: a subset
+    of what the oracle (the image teacher) serves."""
     from mqa_rl.evaluation.policy_units import ORACLES
     from mqa_rl.modules.frozen_policies import make_frozen_policy
-    from mqa_rl.modules.privileged_policy import PrivilegedPushPolicy
 
     served = 0
     for env, gt in _hard_scene_truths(small_dataset):
-        countable, _ = make_frozen_policy(ORACLES["countable_oracle"], env, 10)
+        countable, _ = make_frozen_policy(ORACLES[reference], env, 10)
         mine = {t for _, (t, _) in countable.candidates(gt)}
         assert all(gt["target"][t] and gt["visible"][t] < countable.min_visible_px for t in mine)
-        assert mine <= {t for _, (t, _) in PrivilegedPushPolicy(env, lookahead=1).candidates(gt)}
+        assert mine <= {t for _, (t, _) in make_frozen_policy(ORACLES[base], env, 10)[0].candidates(gt)}
         served += len(mine)
         if not mine:
             assert countable.choose() == actions.STOP
