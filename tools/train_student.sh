@@ -7,9 +7,7 @@
 #       MQA_TEACHER=countable: the countable teacher (issue 40): the refined oracle reading the full silhouettes,
 #       serving the least visible target until the perfect counter's 20-px line, stopping when no simulated push
 #       shows the targets better (~1 s per state); the student on R_c (reward=countable), its stop learnt on the
-#       share of targets a counter misses, fit_stop.py value=uncountable;
-#       MQA_TEACHER=countable_image: the image teacher under the counter's rule, serving only targets the image shows
-#       a fragment of below the 20-px line (evaluate_policy.py's countable_image_teacher), R_c and the same stop)
+#       share of targets a counter misses, fit_stop.py value=uncountable)
 #   2. the geometric student imitating them (profile=student: 2,500 updates, the shipped recognition)
 #   3. its stop, learnt from its own never-stopping episodes on the train split (recipes/fit_stop.py)
 #   4. with MQA_EVAL=<episodes per level>: greedy + learned stop vs random on the test split
@@ -33,9 +31,7 @@ case "$TEACHER" in
   refined) REFINE=1 ;;      # the image teacher's push, the best of 9 simulated starts
   countable) REFINE=1; REWARD=countable; MQA_STOP_VALUE=uncountable
     ORACLE=(oracle.min_visible_fraction=0.0 oracle.require_gain=true oracle.geometry=full oracle.order=least_visible) ;;
-  countable_image) REFINE=0; REWARD=countable; MQA_STOP_VALUE=uncountable
-    ORACLE=(oracle.min_visible_fraction=0.0 oracle.require_gain=false oracle.geometry=visible oracle.order=visible_first) ;;
-  *) echo "MQA_TEACHER must be 'image', 'refined', 'countable' or 'countable_image', got '${TEACHER}'" >&2; exit 2 ;;
+  *) echo "MQA_TEACHER must be 'image', 'refined' or 'countable', got '${TEACHER}'" >&2; exit 2 ;;
 esac
 # the teacher a demonstration set was collected with, as demos.json records it
 WANT="$REFINE $(printf '%s\n' "${ORACLE[@]}" | cut -d= -f2 | tr '\n' ' ' | sed 's/ $//')"

@@ -65,7 +65,7 @@ def run_quick_chain(root, **env):
 
 def test_the_quick_chain_names_its_teachers_and_refuses_others(tmp_path):
     done = run_quick_chain(tmp_path / "run", MQA_TEACHER="bogus")
-    assert done.returncode == 2 and "MQA_TEACHER must be 'image', 'refined', 'countable' or 'countable_image'" in done.stderr
+    assert done.returncode == 2 and "MQA_TEACHER must be 'image', 'refined' or 'countable'" in done.stderr
     assert not (tmp_path / "run").exists()                 # refused before anything is written
 
 
