@@ -261,8 +261,7 @@ def _train(cfg: DictConfig, out: Path) -> dict:
     model.to(device)
     if cfg.init_from:
         init_weights(model, cfg.init_from)
-    loss = PerceptionLoss(model, vote_weight=cfg.train.vote_weight, density_weight=cfg.train.density_weight,
-                           object_weight=cfg.train.object_weight)
+    loss = PerceptionLoss(model, vote_weight=cfg.train.vote_weight, density_weight=cfg.train.density_weight)
     optim = torch.optim.AdamW(model.parameters(), lr=cfg.train.lr, weight_decay=cfg.train.weight_decay)
     steps = int(cfg.train.steps)
     warm = int(cfg.train.warmup_steps)

@@ -7,11 +7,7 @@
 * density: every countable object (≥ 20 visible px in the render) spreads a unit mass over its visible
   cells (squared error summed over an image's cells), and each class's count read from it (density ×
   class probability, summed) meets the perfect counter's count of that class (smooth L1): the
-  measured quantity itself is a loss term;
-* objects (``object_weight``): each object's mass, the density summed over its own pixels, meets its target mass
-  (squared error summed over an image's objects). The per-cell error of a small object is tiny (its unit spread over
-  a few cells), so without this term the density gave countable objects of 20-50 px a third of a unit on average
-  (docs/perception.md, "Where the count errs").
+  measured quantity itself is a loss term.
 
 Trained on crops of a frame (``recipes/train_perception.py train.crop``), an object cut by the crop keeps the mass
 per cell of the whole frame (its unit over its pixels in the *uncropped* map, ``SLOT_AREA``), and each class's count
@@ -44,18 +40,6 @@ def slot_pixels(object_map: torch.Tensor) -> torch.Tensor:
     b, n = object_map.shape[0], MAX_OBJECTS + 1
     ids = object_map.long().flatten(1) + n * torch.arange(b, device=object_map.device)[:, None]
     return torch.bincount(ids.flatten(), minlength=b * n).view(b, n)[:, 1:].float()
-
-
-def object_masses(density: torch.Tensor, object_map: torch.Tensor) -> torch.Tensor:
-    """float [B, 50]: each slot's share of a density map [B, 1, s, s], the cells' masses split by the pixels each
-    slot holds in the cell, from object maps uint8 [B, S, S] (S a multiple of s; 0 = bin, 1 + slot)."""
-    b, size = object_map.shape[0], object_map.shape[-1]
-    pool = size // density.shape[-1]
-    per_pixel = density[:, 0].repeat_interleave(pool, 1).repeat_interleave(pool, 2) / (pool * pool)
-    n = MAX_OBJECTS + 1
-    ids = object_map.long().flatten(1) + n * torch.arange(b, device=object_map.device)[:, None]
-    masses = torch.zeros(b * n, device=density.device, dtype=density.dtype)
-    return masses.index_add_(0, ids.flatten(), per_pixel.flatten()).view(b, n)[:, 1:]
 
 
 def crop_counts(visible_area: torch.Tensor, object_classes: torch.Tensor, num_classes: int, inside: torch.Tensor,
@@ -104,12 +88,11 @@ class PerceptionLoss(nn.Module):
     inputs → losses, the class accuracy of object cells and the density's count error. ``model``: a
     ``CountingPerception``."""
 
-    def __init__(self, model, vote_weight: float = 0.5, density_weight: float = 1.0, object_weight: float = 0.0):
+    def __init__(self, model, vote_weight: float = 0.5, density_weight: float = 1.0):
         super().__init__()
         self.model = model
         self.vote_weight = float(vote_weight)
         self.density_weight = float(density_weight)
-        self.object_weight = float(object_weight)
 
     def forward(self, batch: TensorDict, inputs: torch.Tensor) -> TensorDict:
         logits, votes, density = self.model(inputs)
@@ -128,18 +111,16 @@ class PerceptionLoss(nn.Module):
         expected = (logits.softmax(1)[:, 1:] * density).flatten(2).sum(-1)                  # [B, K-1]
         count_err = F.smooth_l1_loss(expected, counted, reduction="none")
         loss_count = count_err.sum(1).mean()
-        loss_objects = (object_masses(density, omap) - object_masses(target, omap)).square().sum(1).mean()
         with torch.no_grad():
             fg = frac[:, 1:].sum(1) >= 0.5
             right = (logits.argmax(1) == frac.argmax(1)) & fg
             accuracy = right.sum() / fg.sum().clamp_min(1)
         return TensorDict({"loss_class": loss_class, "loss_votes": self.vote_weight * loss_votes,
                            "loss_density": self.density_weight * (loss_map + loss_count),
-                           "loss_objects": self.object_weight * loss_objects,
                            "vote_error": (vote_err * weight).sum().detach() / weight.sum().clamp_min(1.0),
                            "count_error": count_err.detach().sum(1).mean(),
                            "class_accuracy": accuracy}, batch_size=[])
 
     def total(self, td: TensorDict) -> torch.Tensor:
         """The sum the optimiser descends."""
-        return td["loss_class"] + td["loss_votes"] + td["loss_density"] + td["loss_objects"]
+        return td["loss_class"] + td["loss_votes"] + td["loss_density"]

@@ -9,8 +9,7 @@ from tensordict import TensorDict
 from mqa_rl import keys
 from mqa_rl.collectors.perception_frames import check_disjoint, scene_fingerprint
 from mqa_rl.collectors.store import load_records
-from mqa_rl.losses.perception import (PerceptionLoss, countable_counts, crop_counts, object_masses, perception_targets,
-                                      slot_pixels)
+from mqa_rl.losses.perception import PerceptionLoss, countable_counts, crop_counts, perception_targets, slot_pixels
 from mqa_rl.modules import vote_counting
 from mqa_rl.modules.perception import CountingPerception, load_perception, save_perception
 from mqa_rl.modules.vqa import VQAModel, load_vqa, save_vqa
@@ -100,30 +99,6 @@ def test_count_features_put_the_image_row_first_and_one_hot_the_count():
     assert feats[0, 3, -1] == pytest.approx(2.0, abs=1e-4)          # the expected count read from the density
     assert feats[0, 0, 0] == pytest.approx(4 / 50)                   # 2 + 1 + 1 countable objects
     assert feats[0, 1, 0] == 1.0                                     # an absent class counts 0
-
-
-def test_object_masses_read_each_objects_unit_and_the_object_loss_is_zero_only_at_the_target():
-    omap, classes, visible = synthetic_frame()
-    *_, density = perception_targets(omap[None], classes[None], visible[None], K, 56)
-    masses = object_masses(density, omap[None])[0]
-    # objects alone in their cells hold their unit; the tiny one (not countable) and empty slots hold nothing
-    assert masses[0] + masses[1] == pytest.approx(2.0, rel=1e-5)              # the touching pair of class 3
-    # the occluder's rows start mid-cell (55 at 112 px): cells it shares move a little mass between neighbours
-    assert 0.8 < float(masses[2]) < 1.2 and 0.8 < float(masses[3]) < 1.2
-    assert float(masses[4]) == 0.0 and float(masses[5:].abs().sum()) == 0.0
-    model = CountingPerception(K, widths=(8, 8, 16, 16))
-    loss = PerceptionLoss(model, object_weight=1.0)
-    batch = TensorDict({keys.OBJECT_MAP: omap[None], keys.OBJECT_CLASSES: classes[None],
-                        keys.FRAME_VISIBLE: visible[None]}, batch_size=[1])
-    model.forward = lambda x: (torch.zeros(1, K, 56, 56), torch.zeros(1, 2, 56, 56), density)
-    assert float(loss(batch, torch.zeros(1, 3, 112, 112))["loss_objects"]) == pytest.approx(0.0, abs=1e-10)
-    # half the mass of the small countable objects only: the per-cell loss barely moves, the object loss does
-    shrunk = density.clone()
-    shrunk[0, 0, 30:38, 5:35] *= 0.5                                         # the cut object of class 5 (60:70 at 112)
-    model.forward = lambda x: (torch.zeros(1, K, 56, 56), torch.zeros(1, 2, 56, 56), shrunk)
-    td = loss(batch, torch.zeros(1, 3, 112, 112))
-    assert float(td["loss_objects"]) > 0.1
-    assert float(loss.total(td)) > float(td["loss_objects"])
 
 
 def test_perception_learns_a_few_frames():
