@@ -41,7 +41,7 @@ from mqa_rl.losses.perception import PerceptionLoss, countable_counts, slot_pixe
 from mqa_rl.modules import vote_counting
 from mqa_rl.data.dataset import LEVELS
 from mqa_rl.modules.perception import (PERCEPTION_FORMAT, PERCEPTION_VERSION, CountingPerception, check_backbone,
-                                       input_size, load_perception, save_perception, widened_state)
+                                       input_size, load_perception, save_perception)
 from mqa_rl.training.model_checkpoint import ModelCheckpoint
 from mqa_rl.training.resume_guard import RESUMABLE, refuse_changed_config
 from mqa_rl.training.run_dir import RunLock, positive_ints, refuse_unresumable
@@ -150,9 +150,8 @@ def calibrate_file(path: Path, val, device) -> dict:
 
 def init_weights(model: CountingPerception, path: str) -> None:
     """Start from a perception file's weights (same architecture); heads it lacks keep their initialisation,
-    a depth perception started from an rgb file gets its stems' rgb weights with the depth channel's at zero, and
-    a wider U-Net started from a narrower one gets its weights widened (``widened_state``): each starts exactly
-    where the file stands."""
+    and a depth perception started from an rgb file gets its stems' rgb weights with the depth channel's at zero
+    (so it starts exactly where the rgb file stands)."""
     blob = load_versioned(path, PERCEPTION_FORMAT, PERCEPTION_VERSION, what="perception file (init_from)",
                           hint="name a perception.pt of recipes/train_perception.py")
     state = dict(blob["state_dict"])
@@ -160,12 +159,6 @@ def init_weights(model: CountingPerception, path: str) -> None:
     for name in STEMS:
         if name in state and name in own and state[name].shape[1] == 3 and own[name].shape[1] == 4:
             state[name] = torch.cat([state[name], torch.zeros_like(state[name][:, :1])], 1)
-    config = blob.get("config", {})
-    widths = tuple(config.get("widths", model.widths))
-    plain_unet = config.get("backbone", "unet") == "unet" and not config.get("detail", 0)
-    if widths != model.widths and plain_unet:   # a narrower U-Net carried into a wider one, computing the same
-        state = widened_state(state, widths, model)
-        print(f"widened {path}: widths {list(widths)} -> {list(model.widths)} (new channels start silent)")
     try:
         missing, unexpected = model.load_state_dict(state, strict=False)
         shapes = ""

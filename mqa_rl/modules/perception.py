@@ -233,55 +233,6 @@ class CountingPerception(nn.Module):
                 "depth": self.depth}
 
 
-def widened_state(state: dict, widths, model: "CountingPerception") -> dict:
-    """A U-Net state dict of ``widths`` carried into ``model``'s wider U-Net so that it computes exactly the same
-    function: the old channels keep their weights, the new ones keep ``model``'s initialisation for what flows into
-    them and start at zero for what flows out of them (Net2WiderNet's zero variant), so training grows them from where
-    the narrower file stands. Each decoder block reads [upsampled, skip]: the skip's old channels move behind the
-    upsampled map's new width."""
-    old, new = tuple(int(w) for w in widths), model.widths
-    if model.backbone != "unet" or model.detail_width or len(old) != 4 or any(o > n for o, n in zip(old, new)):
-        raise ValueError(f"widening carries a U-Net into one at least as wide without a detail path: file widths "
-                         f"{list(old)}, model.widths={list(new)}, model.detail={model.detail_width}, model.backbone={model.backbone}")
-    (o1, o2, o3, o4), (n1, n2, n3, n4) = old, new
-    cin = 4 if model.depth else 3
-    # the channel layout of each layer's input and output: (old block sizes, new block sizes)
-    inputs = {"down.0": ((cin,), (cin,)), "down.1": ((o1,), (n1,)), "down.2": ((o2,), (n2,)), "down.3": ((o3,), (n3,)),
-              "up3": ((o4, o3), (n4, n3)), "up2": ((o3, o2), (n3, n2)), "up1": ((o2, o1), (n2, n1)),
-              "classes": ((o1,), (n1,)), "votes": ((o1,), (n1,)), "density": ((o1,), (n1,))}
-
-    def index(blocks_old, blocks_new):          # where each old input channel sits in the new layout
-        at, start = [], 0
-        for bo, bn in zip(blocks_old, blocks_new):
-            at += range(start, start + bo)
-            start += bn
-        return torch.tensor(at)
-
-    out = {}
-    for name, target in model.state_dict().items():
-        value = state[name]
-        if value.shape == target.shape:
-            out[name] = value.clone()
-            continue
-        layer = next(k for k in inputs if name == k or name.startswith(k + "."))
-        w = target.clone()
-        if value.dim() == 4:                                       # a convolution [out, in, k, k]
-            first = name == f"{layer}.0.weight"                   # a block's first conv reads the layer's input
-            if layer in ("classes", "votes", "density") or first:
-                rows = torch.arange(value.shape[0])
-                cols = index(*inputs[layer])
-            else:                                                  # a block's second conv reads its own output
-                rows = cols = torch.arange(value.shape[0])
-            fresh = torch.ones(w.shape[1], dtype=torch.bool)
-            fresh[cols] = False
-            w[:, fresh] = 0.0                                      # nothing flows out of a new channel yet
-            w[rows[:, None], cols[None, :]] = value
-        else:                                                      # batch norm and biases [out]
-            w[: value.shape[0]] = value
-        out[name] = w
-    return out
-
-
 def save_perception(model: CountingPerception, path: str | Path, meta: dict) -> Path:
     """Write the weights, architecture and ``meta`` (training data, command, scores) atomically."""
     return save_versioned(path, PERCEPTION_FORMAT, PERCEPTION_VERSION,

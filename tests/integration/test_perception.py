@@ -11,7 +11,7 @@ from mqa_rl.collectors.perception_frames import check_disjoint, scene_fingerprin
 from mqa_rl.collectors.store import load_records
 from mqa_rl.losses.perception import PerceptionLoss, countable_counts, crop_counts, perception_targets, slot_pixels
 from mqa_rl.modules import vote_counting
-from mqa_rl.modules.perception import CountingPerception, load_perception, save_perception, widened_state
+from mqa_rl.modules.perception import CountingPerception, load_perception, save_perception
 from mqa_rl.modules.vqa import VQAModel, load_vqa, save_vqa
 from mqa_rl.transforms.episode_stats import COUNTABLE_PX
 
@@ -99,43 +99,6 @@ def test_count_features_put_the_image_row_first_and_one_hot_the_count():
     assert feats[0, 3, -1] == pytest.approx(2.0, abs=1e-4)          # the expected count read from the density
     assert feats[0, 0, 0] == pytest.approx(4 / 50)                   # 2 + 1 + 1 countable objects
     assert feats[0, 1, 0] == 1.0                                     # an absent class counts 0
-
-
-def test_a_widened_unet_computes_what_the_narrow_one_did_and_then_learns_in_its_new_channels():
-    torch.manual_seed(0)
-    narrow = CountingPerception(K, widths=(8, 8, 16, 16))
-    for module in narrow.modules():               # batch-norm statistics of a trained file, not the identity
-        if isinstance(module, torch.nn.BatchNorm2d):
-            module.running_mean.uniform_(-0.5, 0.5)
-            module.running_var.uniform_(0.5, 2.0)
-    wide = CountingPerception(K, widths=(12, 16, 24, 32))
-    wide.load_state_dict(widened_state(narrow.state_dict(), narrow.widths, wide))
-    narrow.eval(), wide.eval()
-    x = torch.randn(2, 3, 64, 64)
-    with torch.no_grad():
-        for a, b in zip(narrow(x), wide(x)):
-            assert torch.allclose(a, b, atol=1e-5)
-    # nothing flows out of a new channel yet, yet the gradient reaches those outgoing weights
-    # up1 reads [up2's 16 channels, down.0's 12]: the old 8 + 8 sit at 0:8 and 16:24
-    assert float(wide.up1[0].weight[:, 8:16].abs().sum()) == 0.0 and float(wide.up1[0].weight[:, 24:].abs().sum()) == 0.0
-    assert float(wide.up1[0].weight[:8, 16:24].abs().sum()) > 0.0
-    wide.train()
-    sum(t.sum() for t in wide(x)).backward()
-    assert float(wide.classes.weight.grad[:, 8:].abs().sum()) > 0.0
-    with pytest.raises(ValueError, match="at least as wide"):
-        widened_state(wide.state_dict(), wide.widths, CountingPerception(K, widths=(8, 8, 16, 16)))
-
-
-def test_init_from_widens_a_narrower_file_even_into_a_depth_perception(tmp_path):
-    from conftest import load_recipe
-
-    torch.manual_seed(0)
-    narrow = CountingPerception(K, widths=(8, 8, 16, 16)).eval()
-    wide = CountingPerception(K, widths=(12, 16, 24, 32), depth=True)
-    load_recipe("train_perception").init_weights(wide, str(save_perception(narrow, tmp_path / "narrow.pt", {})))
-    rgb = torch.randint(0, 255, (2, 3, 224, 224), dtype=torch.uint8)
-    for a, b in zip(narrow.predict(rgb), wide.eval().predict(rgb, torch.rand(2, 1, 224, 224) + 1.5)):
-        assert torch.allclose(a, b, atol=1e-5)
 
 
 def test_perception_learns_a_few_frames():
