@@ -7,6 +7,10 @@ target's visible area.
     python benchmarks/perception_counts.py --perception checkpoints/vqa_counting/perception.pt
     python benchmarks/perception_counts.py --perception ... --dataset data/mqa_heldout     # fresh piles
     python benchmarks/perception_counts.py --perception A.pt --baseline B.pt               # A − B, paired by question
+    python benchmarks/perception_counts.py --perception A448.pt --render 448 --baseline B.pt   # A reads a 448-px render
+
+The truth is always the 224-px render's (the answering episodes' and the perfect counter's); ``--render`` renders
+the same rest piles finer for the perception A alone (the baseline reads the 224-px render).
 """
 
 from __future__ import annotations
@@ -33,10 +37,10 @@ from mqa_rl.transforms.episode_stats import COUNTABLE_PX
 AREA_BINS = ((20, 100), (100, 500), (500, float("inf")))
 
 
-def first_images(ds: MQADataset, split: str):
+def first_images(ds: MQADataset, split: str, render: int = 224):
     """{scene index: (rgb uint8 [3, H, W], visible px [n], class per object [n], depth [1, H, W])} of the split's
-    rest piles."""
-    env = SapienBinEnv(ds, split=None)
+    rest piles, rendered at ``render`` px a side."""
+    env = SapienBinEnv(ds, split=None, image_size=render)
     first = scene_questions(ds)
     out = {}
     for i, scene in enumerate(ds.scenes):
@@ -70,17 +74,22 @@ def main() -> None:
     p.add_argument("--split", default="test")
     p.add_argument("--baseline", default=None, help="another perception file: also A − baseline on the same images, "
                                                     "paired by question, 95 %% by scene")
+    p.add_argument("--render", type=int, default=224, help="the side of the render the perception A reads (a finer "
+                                                            "one than 224: the same piles; the truth stays the 224-px one)")
     p.add_argument("--json", default=None, help="also write the figures to this file")
     a = p.parse_args()
+    if a.render < 224 or a.render % 224:
+        p.error(f"--render must be a multiple of 224, got {a.render}")
     torch.set_num_threads(2)
     ds = MQADataset(a.dataset)
     model, meta = load_perception(a.perception)
     t0 = time.perf_counter()
     scenes = first_images(ds, a.split)
+    fine = first_images(ds, a.split, a.render) if a.render != 224 else scenes
     render_s = time.perf_counter() - t0
     order = sorted(scenes)
     t0 = time.perf_counter()
-    counted = count_scenes(model, scenes, order)
+    counted = count_scenes(model, fine, order)
     perceive_s = time.perf_counter() - t0
     baseline = count_scenes(load_perception(a.baseline)[0], scenes, order) if a.baseline else None
     index = {s.id: i for i, s in enumerate(ds.scenes)}
@@ -94,6 +103,7 @@ def main() -> None:
                      float(areas.min()) if len(areas) else float("nan"), int(baseline[i][c - 1]) if baseline else -1))
     t = torch.tensor(rows, dtype=torch.float64)
     report = {"perception": a.perception, "baseline": a.baseline, "dataset": a.dataset, "split": a.split, "step": meta.get("step"),
+              "render": a.render,
               "counting": model.counting,
               "render_s": round(render_s, 1), "perceive_ms_per_image": round(1000 * perceive_s / len(order), 1), "levels": {}}
     print(f"{a.perception} (step {meta.get('step')}) on {a.dataset} {a.split}: {len(order)} first images "

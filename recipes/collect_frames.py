@@ -25,7 +25,8 @@ def main(cfg: DictConfig) -> None:
     exit_on_sigterm()
     protected = [(MQADataset(p.dataset), p.split) for p in cfg.protected]
     summary = collect_perception_frames(cfg.out_dir, cfg.dataset, episodes_per_scene=int(cfg.episodes_per_scene),
-                                        pushes=int(cfg.pushes), size=int(cfg.size), protected=protected,
+                                        pushes=int(cfg.pushes), size=int(cfg.size), render=int(cfg.render),
+                                        protected=protected,
                                         workers=int(cfg.workers), chunk_episodes=int(cfg.chunk_episodes),
                                         seed=int(cfg.seed), overwrite=bool(cfg.overwrite))
     print("done:", summary)

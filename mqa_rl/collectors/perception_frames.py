@@ -5,11 +5,13 @@ One *pile episode* rebuilds a scene at its settled rest poses, renders it, then 
 answering episode starts from and the disturbed piles a policy leaves behind. Every frame becomes
 one record of an ``EpisodeStore`` (atomic chunks, resumable, locked; slot = episode × frames + k):
 
-    rgb            uint8 [3, S, S]    the render, resized to the perception's input (antialiased, as
-                                      ``standardise`` does at answer time)
+    rgb            uint8 [3, S, S]    the render (``render`` px a side: 224, the env's and the answering
+                                      episodes' size, or finer), resized to the perception's input
+                                      (antialiased, as ``standardise`` does at answer time)
     depth          float16 [1, S, S]  the depth image (metres), resized alike (``perception.resize_depth``; schema 2)
     object_map     uint8 [S, S]       0 = bin, 1 + the object's slot in the scene (nearest pixel)
-    visible_area   float32 [50]       each object's visible pixels in the 224-px render (the counting rule's unit)
+    visible_area   float32 [50]       each object's visible pixels in 224-px render units (the counting rule's; a
+                                      finer render's count × (224 / render)²)
     object_classes int64 [50]         1 + index into the dataset's classes; 0 = no object in that slot
     scene, level, pushes              which scene, its level, pushes made before this frame
 
@@ -38,7 +40,7 @@ from mqa_rl.collectors.store import EpisodeStore
 from mqa_rl.data.dataset import LEVELS, MQADataset, dataset_fingerprint
 from mqa_rl.envs import actions
 from mqa_rl.envs.sapien_bin import MAX_OBJECTS, SapienBinEnv
-from mqa_rl.modules.perception import resize_depth
+from mqa_rl.modules.perception import RENDER_SIZE, resize_depth
 
 
 def scene_fingerprint(scene) -> str:
@@ -69,9 +71,10 @@ def resize_rgb(rgb: torch.Tensor, size: int) -> torch.Tensor:
 def _frame(env: SapienBinEnv, td, size: int) -> dict:
     omap = object_map(env)
     stride = omap.shape[-1] // size
+    to_render_units = (RENDER_SIZE / omap.shape[-1]) ** 2       # a finer render's pixels, counted in 224-px ones
     return {keys.RGB: resize_rgb(td[keys.RGB], size), keys.DEPTH: resize_depth(td[keys.DEPTH][None], size)[0].half(),
             keys.OBJECT_MAP: omap[stride // 2::stride, stride // 2::stride].clone(),
-            keys.FRAME_VISIBLE: td[keys.VISIBLE_AREA].clone(), keys.PUSHES: torch.tensor(int(td[keys.PUSH_COUNT]))}
+            keys.FRAME_VISIBLE: td[keys.VISIBLE_AREA] * to_render_units, keys.PUSHES: torch.tensor(int(td[keys.PUSH_COUNT]))}
 
 
 def scene_questions(ds: MQADataset) -> dict[str, str]:
@@ -111,7 +114,8 @@ _WORKER: dict = {}
 
 def _init(root: str, run: dict) -> None:
     torch.set_num_threads(1)
-    _WORKER.update(env=SapienBinEnv(root, split=None, max_pushes=max(1, run["pushes"])), run=run)
+    _WORKER.update(env=SapienBinEnv(root, split=None, max_pushes=max(1, run["pushes"]), image_size=run["render"]),
+                   run={k: v for k, v in run.items() if k != "render"})
 
 
 def _task(task: tuple[int, int, str]) -> dict:
@@ -120,17 +124,22 @@ def _task(task: tuple[int, int, str]) -> dict:
 
 
 def collect_perception_frames(out_dir, dataset, *, episodes_per_scene: int, pushes: int, size: int = 112,
-                              protected=(), workers: int = 2, chunk_episodes: int = 16, seed: int = 0,
-                              overwrite: bool = False, progress: bool = True) -> dict:
-    """Collect (or finish collecting) every scene's ``episodes_per_scene`` pile episodes into ``out_dir``."""
+                              render: int = RENDER_SIZE, protected=(), workers: int = 2, chunk_episodes: int = 16,
+                              seed: int = 0, overwrite: bool = False, progress: bool = True) -> dict:
+    """Collect (or finish collecting) every scene's ``episodes_per_scene`` pile episodes into ``out_dir``, rendered at
+    ``render`` px a side (a finer render than the env's 224 shows thin and small targets a perception cannot resolve
+    at 224) and stored at ``size``."""
     if episodes_per_scene < 1 or pushes < 0 or chunk_episodes < 1:
         raise ValueError(f"need episodes_per_scene ≥ 1, pushes ≥ 0, chunk_episodes ≥ 1; got {episodes_per_scene}, "
                          f"{pushes}, {chunk_episodes}")
+    if render < RENDER_SIZE or render % RENDER_SIZE or size < 1 or render % size:
+        raise ValueError(f"render must be a multiple of {RENDER_SIZE} px and size divide it (frames are the render "
+                         f"subsampled); got render={render}, size={size}")
     ds = dataset if isinstance(dataset, MQADataset) else MQADataset(dataset)
     check_disjoint(ds, protected)
     first = scene_questions(ds)
     tasks = [(e * len(ds.scenes) + s, s, first[scene.id]) for e in range(episodes_per_scene) for s, scene in enumerate(ds.scenes)]
-    run = {"pushes": int(pushes), "size": int(size), "seed": int(seed)}
+    run = {"pushes": int(pushes), "size": int(size), "render": int(render), "seed": int(seed)}
     meta = {"schema": SCHEMA, "kind": "perception_frames",
             "dataset": {"root": str(ds.root), "manifest_sha256": dataset_fingerprint(ds.root)},
             "plan": {"episodes_per_scene": int(episodes_per_scene), **run}, "slots": len(tasks) * (pushes + 1)}

@@ -191,6 +191,28 @@ def test_a_pretraining_set_sharing_a_scene_with_the_test_split_is_refused():
     check_disjoint(_dataset("data/frames", [("s", "train", [obj("can_0", 0.02)])]), [(evaluation, "test")])
 
 
+def test_a_finer_render_sees_the_same_rest_pile_and_keeps_areas_in_224_px_units(small_dataset):
+    """collect_frames render=448: the same rest pile as the env's 224-px render, its object map twice as fine and
+    each object's visible area counted in 224-px pixels (the counting rule's), within the resampling."""
+    from mqa_rl.collectors.perception_frames import collect_perception_frames, pile_episode, scene_questions
+    from mqa_rl.envs.sapien_bin import SapienBinEnv
+
+    qid = scene_questions(small_dataset)[small_dataset.scenes[0].id]
+    frames = {}
+    for render in (224, 448):
+        env = SapienBinEnv(small_dataset, split=None, max_pushes=1, image_size=render)
+        frames[render] = pile_episode(env, 0, qid, pushes=0, size=render, seed=0, slot=0)[0]
+        env.close()
+    coarse, fine = frames[224], frames[448]
+    assert fine.get(keys.RGB).shape[-1] == fine.get(keys.OBJECT_MAP).shape[-1] == 448
+    assert (fine.get(keys.OBJECT_MAP)[::2, ::2] != coarse.get(keys.OBJECT_MAP)).float().mean() < 0.02
+    a, b = coarse.get(keys.FRAME_VISIBLE), fine.get(keys.FRAME_VISIBLE)
+    big = a >= 100
+    assert big.sum() >= 3 and ((b[big] - a[big]).abs() / a[big]).max() < 0.15
+    with pytest.raises(ValueError, match="render must be a multiple"):
+        collect_perception_frames("unused", small_dataset, episodes_per_scene=1, pushes=0, size=224, render=300)
+
+
 def test_frames_perception_and_counting_vqa_recipes_end_to_end(small_dataset, sparse_dataset, answering_root, tmp_path):
     """collect_frames (resumable, refuses the test split's piles) → train_perception (resumes, refuses
     changed settings) → train_vqa vqa=counting → load_vqa answers."""
