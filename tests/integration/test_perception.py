@@ -16,6 +16,7 @@ from mqa_rl.modules.vqa import VQAModel, load_vqa, save_vqa
 from mqa_rl.transforms.episode_stats import COUNTABLE_PX
 
 K = 8          # classes incl. background in these synthetic frames
+K_SHIPPED = 21  # the dataset's 20 classes + the bin
 
 
 def synthetic_frame():
@@ -323,6 +324,24 @@ def test_the_shipped_counting_vqas_load_with_their_provenance_and_answer(system,
     frame = torch.full((1, 224, 224, 3), 128, dtype=torch.uint8)
     probs = model.answer_probs(model.tokenize(["How many cans are there in the bin?"]), frame, frame)
     assert probs.shape == (1, len(model.answers)) and torch.allclose(probs.sum(-1), torch.ones(1))
+
+
+def test_the_448_px_perception_loads_with_its_provenance_and_counts_a_448_render_at_224_cells():
+    """checkpoints/perception_448 (the resolution lever's warm start): its hash is its provenance's, it reads a
+    448-px render at one output cell per pixel of the 224-px render, and its counts are whole and non-negative."""
+    import hashlib
+    import json
+
+    from conftest import REPO
+
+    folder = REPO / "checkpoints" / "perception_448"
+    provenance = json.loads((folder / "provenance.json").read_text())
+    assert hashlib.sha256((folder / "perception.pt").read_bytes()).hexdigest() == provenance["perception_sha256"]
+    model, meta = load_perception(folder / "perception.pt")
+    assert (model.image_size, model.out_size, model.cell_px) == (448, 224, 1.0)
+    assert provenance["frames"]["plan"]["render"] == 448 and meta["step"] == 1800
+    counts = model.counts(torch.randint(0, 255, (1, 3, 448, 448), dtype=torch.uint8))
+    assert counts.shape == (1, K_SHIPPED - 1) and (counts >= 0).all()
 
 
 def test_the_detail_path_reads_the_full_render_and_warm_starts_from_a_file_without_it(tmp_path):
