@@ -31,13 +31,13 @@ from mqa_rl.data.dataset import LEVELS
 from mqa_rl.envs.sapien_bin import SapienBinEnv
 from mqa_rl.evaluation.episode_metrics import scene_bootstrap_ci95
 from mqa_rl.files import write_atomic
-from mqa_rl.modules.perception import load_perception
+from mqa_rl.modules.perception import RENDER_SIZE, load_perception
 from mqa_rl.transforms.episode_stats import COUNTABLE_PX
 
 AREA_BINS = ((20, 100), (100, 500), (500, float("inf")))
 
 
-def first_images(ds: MQADataset, split: str, render: int = 224):
+def first_images(ds: MQADataset, split: str, render: int = RENDER_SIZE):
     """{scene index: (rgb uint8 [3, H, W], visible px [n], class per object [n], depth [1, H, W])} of the split's
     rest piles, rendered at ``render`` px a side."""
     env = SapienBinEnv(ds, split=None, image_size=render)
@@ -74,18 +74,18 @@ def main() -> None:
     p.add_argument("--split", default="test")
     p.add_argument("--baseline", default=None, help="another perception file: also A − baseline on the same images, "
                                                     "paired by question, 95 %% by scene")
-    p.add_argument("--render", type=int, default=224, help="the side of the render the perception A reads (a finer "
+    p.add_argument("--render", type=int, default=RENDER_SIZE, help="the side of the render the perception A reads (a finer "
                                                             "one than 224: the same piles; the truth stays the 224-px one)")
     p.add_argument("--json", default=None, help="also write the figures to this file")
     a = p.parse_args()
-    if a.render < 224 or a.render % 224:
-        p.error(f"--render must be a multiple of 224, got {a.render}")
+    if a.render < RENDER_SIZE or a.render % RENDER_SIZE:
+        p.error(f"--render must be a multiple of {RENDER_SIZE}, got {a.render}")
     torch.set_num_threads(2)
     ds = MQADataset(a.dataset)
     model, meta = load_perception(a.perception)
     t0 = time.perf_counter()
     scenes = first_images(ds, a.split)
-    fine = first_images(ds, a.split, a.render) if a.render != 224 else scenes
+    fine = first_images(ds, a.split, a.render) if a.render != RENDER_SIZE else scenes
     render_s = time.perf_counter() - t0
     order = sorted(scenes)
     t0 = time.perf_counter()

@@ -112,10 +112,9 @@ def pile_episode(env: SapienBinEnv, scene_index: int, question_id: str, *, pushe
 _WORKER: dict = {}
 
 
-def _init(root: str, run: dict) -> None:
+def _init(root: str, render: int, run: dict) -> None:
     torch.set_num_threads(1)
-    _WORKER.update(env=SapienBinEnv(root, split=None, max_pushes=max(1, run["pushes"]), image_size=run["render"]),
-                   run={k: v for k, v in run.items() if k != "render"})
+    _WORKER.update(env=SapienBinEnv(root, split=None, max_pushes=max(1, run["pushes"]), image_size=render), run=run)
 
 
 def _task(task: tuple[int, int, str]) -> dict:
@@ -139,21 +138,22 @@ def collect_perception_frames(out_dir, dataset, *, episodes_per_scene: int, push
     check_disjoint(ds, protected)
     first = scene_questions(ds)
     tasks = [(e * len(ds.scenes) + s, s, first[scene.id]) for e in range(episodes_per_scene) for s, scene in enumerate(ds.scenes)]
-    run = {"pushes": int(pushes), "size": int(size), "render": int(render), "seed": int(seed)}
+    run = {"pushes": int(pushes), "size": int(size), "seed": int(seed)}
     meta = {"schema": SCHEMA, "kind": "perception_frames",
             "dataset": {"root": str(ds.root), "manifest_sha256": dataset_fingerprint(ds.root)},
-            "plan": {"episodes_per_scene": int(episodes_per_scene), **run}, "slots": len(tasks) * (pushes + 1)}
+            "plan": {"episodes_per_scene": int(episodes_per_scene), **run, "render": int(render)},
+            "slots": len(tasks) * (pushes + 1)}
     t0 = time.perf_counter()
     new = 0
     with EpisodeStore(out_dir, meta, overwrite=overwrite) as store:
         done = store.done_slots()
         todo = [t for t in tasks if t[0] * (pushes + 1) not in done]
         if workers <= 1:                      # in this process: no worker start-up (~10 s), easier to debug
-            _init(str(ds.root), run)
+            _init(str(ds.root), int(render), run)
             pool = None
             results = map(_task, todo)
         else:
-            pool = mp.get_context("spawn").Pool(min(workers, max(len(todo), 1)), initializer=_init, initargs=(str(ds.root), run))
+            pool = mp.get_context("spawn").Pool(min(workers, max(len(todo), 1)), initializer=_init, initargs=(str(ds.root), int(render), run))
             results = pool.imap_unordered(_task, todo)
         bar = tqdm(total=len(tasks) * (pushes + 1), initial=len(done), unit="frame", disable=not progress, desc="frames")
         buffer: list[TensorDict] = []

@@ -328,7 +328,7 @@ def test_the_shipped_counting_vqas_load_with_their_provenance_and_answer(system,
 
 def test_the_448_px_perception_loads_with_its_provenance_and_counts_a_448_render_at_224_cells():
     """checkpoints/perception_448 (the resolution lever's warm start): its hash is its provenance's, it reads a
-    448-px render at one output cell per pixel of the 224-px render, and its counts are whole and non-negative."""
+    448-px render at one output cell per pixel of the 224-px render, one non-negative count per class."""
     import hashlib
     import json
 
