@@ -19,13 +19,12 @@ import json
 from pathlib import Path
 
 from mqa_rl import keys
-from mqa_rl.collectors.store import load_records
 from mqa_rl.data.dataset import LEVELS
 from mqa_rl.data.questions import QUESTION_TYPES
 from mqa_rl.evaluation import answering as ans
 from mqa_rl.modules.vqa import CHECKPOINT_NAME, load_vqa
 from mqa_rl.modules.vqa_ensemble import VQAEnsemble
-from mqa_rl.training.vqa_data import IMAGE_KEYS, RECORD_KEYS
+from mqa_rl.training.vqa_data import load_answering_records
 
 
 def load_side(paths: list[str]):
@@ -41,13 +40,16 @@ def main() -> None:
     p.add_argument("--b", nargs="+", required=True)
     p.add_argument("--json", default=None, help="also write the figures to this file")
     args = p.parse_args()
-    records = load_records(args.rollouts, (*RECORD_KEYS, *IMAGE_KEYS))
-    records = records[records.get(keys.TYPE_LABEL) == QUESTION_TYPES.index("counting")]
+    records = load_answering_records(args.rollouts, images=False)
+    counting = records.get(keys.TYPE_LABEL) == QUESTION_TYPES.index("counting")
+    records = records[counting]
     if records.shape[0] == 0:
         raise SystemExit(f"{args.rollouts} holds no COUNTING episodes: give a store collected with questions=counting")
     right = {}
     for side, paths in (("a", args.a), ("b", args.b)):
-        right[side] = ans.predict(load_side(paths), records) == records.get(keys.ANSWER_LABEL)
+        model = load_side(paths)       # each side reads its frames (a finer perception: the answer camera's)
+        frames = load_answering_records(args.rollouts, size=model.frame_size)[counting]
+        right[side] = ans.predict(model, frames) == records.get(keys.ANSWER_LABEL)
     report = {"rollouts": args.rollouts, "a": args.a, "b": args.b, "levels": {}}
     print(f"{args.rollouts}: COUNTING, A = {' + '.join(args.a)}, B = {' + '.join(args.b)}")
     print(f"{'level':8} {'A':>22} {'B':>22} {'A - B':>26} scenes")

@@ -45,9 +45,9 @@ from mqa_rl.files import write_atomic
 from mqa_rl.modules.frozen_policies import resolve_checkpoint, system_spec
 from mqa_rl.modules.vqa import CHECKPOINT_NAME, load_vqa
 from mqa_rl.modules.vqa_ensemble import VQAEnsemble
-from mqa_rl.training.vqa_data import IMAGE_KEYS, RECORD_KEYS
+from mqa_rl.training.vqa_data import IMAGE_KEYS, RECORD_KEYS, load_answering_records
 
-EVAL_KEYS = (*RECORD_KEYS, *IMAGE_KEYS, keys.EPISODE_TARGETS, (keys.FIRST, keys.FRAME_VISIBLE),
+EVAL_KEYS = (*RECORD_KEYS, keys.EPISODE_TARGETS, (keys.FIRST, keys.FRAME_VISIBLE),
              (keys.LAST, keys.FRAME_VISIBLE))
 # what the calibrated counter reads from the training rollouts
 COUNT_KEYS = (keys.TYPE_LABEL, keys.LEVEL, keys.ANSWER_LABEL, keys.EPISODE_TARGETS, (keys.FIRST, keys.FRAME_VISIBLE),
@@ -120,6 +120,8 @@ def evaluate_system(cfg: DictConfig, ds: MQADataset, name: str, plan_sha: str) -
                              f"test split, so it would be scored on what it learnt; train it on the training split's rollouts")
         if meta.get("system") not in (None, name):
             warnings.warn(f"{path} was trained on the rollouts of {meta['system']!r}, not {name!r}", stacklevel=2)
+    # the frames this VQA reads: the answer camera's where its perception reads finer than the env renders
+    records.update(load_answering_records(store, size=model.frame_size).select(*IMAGE_KEYS))
     t1 = time.perf_counter()
     right = ans.predict(model, records, cfg.batch_size) == records.get(keys.ANSWER_LABEL)
     counting = records.get(keys.TYPE_LABEL) == QUESTION_TYPES.index("counting")

@@ -220,11 +220,11 @@ def _train(cfg: DictConfig, out: Path) -> dict:
         bar = tqdm(total=int(meta["slots"]) * 2, unit="frame", desc=f"encoding ×{transforms}", disable=not cfg.logger.progress)
         model.eval()
         records = encode_store(cfg.rollouts, lambda x: model.encode_frames(x.to(device)).cpu(), transforms=transforms,
-                               progress=bar)
+                               size=model.frame_size, progress=bar)
         bar.close()
         model.train()
     else:
-        records = load_answering_records(cfg.rollouts, images=True)
+        records = load_answering_records(cfg.rollouts, images=True, size=model.frame_size)
     feature_seconds = time.perf_counter() - t0
     records.set(keys.QUESTION_CLASSES, question_class_labels(records, ds))
     val_mask = scene_split(records, cfg.train.val_fraction, cfg.seed)

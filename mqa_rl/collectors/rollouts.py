@@ -1,5 +1,6 @@
 """Rollouts of a frozen policy over a set of questions, stored for the VQA: per episode the question,
-its answer and type, scene and level, I_start and I_stop (rgb uint8, depth float16), the per-object
+its answer and type, scene and level, I_start and I_stop (rgb uint8, depth float16; with ``answer_size`` also the
+answer camera's finer rgb, which a VQA whose perception reads that size takes instead), the per-object
 measurements of both frames, pushes used and the targets' mean χ at start and end.
 
     collect_rollouts("runs/answering/rollouts/counting/random/train", dataset="data/mqa",
@@ -85,9 +86,16 @@ def object_map(env: SapienBinEnv) -> torch.Tensor:
     return torch.from_numpy(lut[seg])
 
 
-def _frame(td, store_depth: bool, omap: torch.Tensor | None) -> TensorDict:
+def answer_image(env: SapienBinEnv) -> torch.Tensor | None:
+    """uint8 [3, S, S] of the env's answer camera (``answer_size``), or None when it has none."""
+    return env.answer_image() if env.answer_camera is not None else None
+
+
+def _frame(td, store_depth: bool, omap: torch.Tensor | None, answer: torch.Tensor | None) -> TensorDict:
     out = {keys.RGB: td.get(keys.RGB), keys.FRAME_OVERLAP: td.get(keys.OVERLAP),
            keys.FRAME_VISIBLE: td.get(keys.VISIBLE_AREA), keys.FRAME_FULL: td.get(keys.FULL_AREA)}
+    if answer is not None:
+        out[keys.ANSWER_RGB] = answer
     if store_depth:
         out[keys.DEPTH] = td.get(keys.DEPTH).to(torch.float16)
     if omap is not None:
@@ -108,6 +116,7 @@ def run_question_episode(env: SapienBinEnv, policy, exploration, question_index:
     torch.manual_seed(episode_seed(seed, slot))
     td = env.reset(question_id=question.id)
     first_map = object_map(env) if store_object_map else None
+    first_answer = answer_image(env)
     with torch.no_grad(), set_exploration_type(exploration):
         traj = env.rollout(max_pushes + 1, policy, auto_reset=False, tensordict=td, break_when_any_done=True)
     if not bool(traj["next", "done"][-1].item()):
@@ -115,6 +124,7 @@ def run_question_episode(env: SapienBinEnv, policy, exploration, question_index:
                            f"max_pushes larger than {max_pushes}?")
     first, last = traj[0], traj["next"][-1]
     last_map = object_map(env) if store_object_map else None
+    last_answer = answer_image(env)
     scene = env.dataset.scene(question.scene_id)
     scalar = lambda v, dtype=torch.int64: torch.as_tensor(v, dtype=dtype).reshape(())   # noqa: E731
     return TensorDict({
@@ -128,7 +138,8 @@ def run_question_episode(env: SapienBinEnv, policy, exploration, question_index:
         keys.STOPPED: scalar(last.get(keys.IS_STOP), torch.bool),
         keys.EPISODE_TARGETS: first.get(keys.TARGET_MASK),
         keys.CHI_START: _chi(first), keys.CHI_END: _chi(last),
-        keys.FIRST: _frame(first, store_depth, first_map), keys.LAST: _frame(last, store_depth, last_map),
+        keys.FIRST: _frame(first, store_depth, first_map, first_answer),
+        keys.LAST: _frame(last, store_depth, last_map, last_answer),
     }, batch_size=[])
 
 
@@ -190,7 +201,7 @@ class _InProcess:
 # ----------------------------------------------------------------------------------------- collection
 def collect_rollouts(out_dir, *, dataset, policy, split: str, question_types=("counting",), levels=None,
                      max_per_group: int | None = None, repeats: int = 1, max_pushes: int = 10, image_size: int = 224,
-                     pusher: str = "finger", workers: int = 2, chunk_episodes: int = 32, seed: int = 0,
+                     answer_size: int | None = None, pusher: str = "finger", workers: int = 2, chunk_episodes: int = 32, seed: int = 0,
                      store_depth: bool = True, store_object_map: bool = True, overwrite: bool = False,
                      progress: bool = True, backend: str = "local", ray_address: str | None = None) -> dict:
     """Collect (or finish collecting) the rollouts of ``policy`` (a spec, see ``frozen_policies``) into
@@ -207,6 +218,8 @@ def collect_rollouts(out_dir, *, dataset, policy, split: str, question_types=("c
     reps = 1 if is_deterministic(spec) else int(repeats)
     tasks = [(i * reps + r, q, r) for i, q in enumerate(questions) for r in range(reps)]
     env_kwargs = {"max_pushes": int(max_pushes), "image_size": int(image_size), "pusher": pusher}
+    if answer_size is not None and int(answer_size) != int(image_size):     # absent otherwise: older stores stay resumable
+        env_kwargs["answer_size"] = int(answer_size)
     run = {"max_pushes": int(max_pushes), "seed": int(seed), "store_depth": bool(store_depth),
            "store_object_map": bool(store_object_map)}
     meta = {"schema": SCHEMA, "kind": "rollouts",
@@ -272,7 +285,8 @@ def collect_split(out_dir, split: str, *, dataset, policy, questions, collection
     return collect_rollouts(
         out_dir, dataset=dataset, policy=policy, split=split, question_types=list(questions["types"]),
         max_per_group=questions["max_per_group"][split], repeats=int(collection["repeats"][split]),
-        max_pushes=int(env["max_pushes"]), image_size=int(env["image_size"]), pusher=env["pusher"],
+        max_pushes=int(env["max_pushes"]), image_size=int(env["image_size"]), answer_size=env.get("answer_size"),
+        pusher=env["pusher"],
         workers=int(collection["workers"]), chunk_episodes=int(collection["chunk_episodes"]), seed=int(collection["seed"]),
         store_depth=bool(collection["store_depth"]), store_object_map=bool(collection["store_object_map"]),
         overwrite=overwrite, progress=progress, backend=collection.get("backend", "local"),

@@ -22,6 +22,10 @@ Task sheet
   raises ``RuntimeError`` until ``reset()`` (TorchRL's rollouts and collectors reset on done).
 * **Pusher**: ``pusher="finger"`` (default, a force-limited capsule) or ``"arm"`` (a Panda with a
   stick, ``mqa_rl.sim.arm_pusher``; needs ``pip install 'mqa_rl[arm]'``), or any ``Pusher`` object.
+* **Answer camera**: ``answer_size`` (a multiple of ``image_size``, e.g. 448) adds a second camera at the same
+  pose and field of view; ``env.answer_image()`` renders the scene as it stands through it. The answering half
+  reads I_start / I_stop there (small targets are slivers at 224 px: docs/perception.md, "Resolution") while the
+  observation, and with it the push grid, stays at ``image_size``.
 * **Reward**: always 0 here. The env measures; ``mqa_rl.transforms`` turn measurements into reward.
 
 >>> env = SapienBinEnv("data/mqa", split="train", question_types=["counting"])   # doctest: +SKIP
@@ -82,6 +86,7 @@ class SapienBinEnv(EnvBase):
         difficulties=None,
         question_types=None,
         image_size: int = 224,
+        answer_size: int | None = None,
         max_pushes: int = 10,
         settle_steps: int = 240,
         settle_speed: float = 0.005,
@@ -99,6 +104,7 @@ class SapienBinEnv(EnvBase):
             raise ValueError(f"max_pushes must be ≥ 1, got {max_pushes}")
         base = self.dataset.camera
         self.camera = CameraSpec(image_size, image_size, base.fovy_deg, base.distance, base.near, base.far)
+        self.answer_camera = _answer_camera(self.camera, answer_size)
         self.push_length = self.camera.floor_width() / 4
         self.max_pushes = max_pushes
         self.settle_steps = settle_steps
@@ -181,7 +187,8 @@ class SapienBinEnv(EnvBase):
         question = self._pick_question(tensordict, question_id)
         scene = self.dataset.scene(question.scene_id)
         assets = self.dataset.assets(scene)
-        self.world = build_world(assets, scene.poses, bin_spec=self.dataset.bin, camera=self.camera)
+        self.world = build_world(assets, scene.poses, bin_spec=self.dataset.bin, camera=self.camera,
+                                 answer_camera=self.answer_camera)
         self.pusher.attach(self.world)
         self.question = question
         self._projector = SilhouetteProjector([list(a.collision_parts) for a in assets], self.camera)
@@ -250,6 +257,15 @@ class SapienBinEnv(EnvBase):
         full = self._projector.areas(poses).astype(np.float32)
         overlap = overlap_rate(torch.from_numpy(visible), torch.from_numpy(full)).numpy()
         return {"rgb": rgb, "depth": depth, "seg": seg, "poses": poses, "visible": visible, "full": full, "overlap": overlap}
+
+    def answer_image(self) -> torch.Tensor:
+        """uint8 [3, S, S]: the scene as it stands through the answer camera (``answer_size`` px a side; without
+        one, the last observation's ``rgb``). The frames the answering half reads (I_start, I_stop)."""
+        if self.world is None:
+            raise RuntimeError("call reset() before answer_image()")
+        if self.answer_camera is None:
+            return self._last.get(keys.RGB).clone()
+        return torch.from_numpy(np.ascontiguousarray(self.world.render_answer().transpose(2, 0, 1)))
 
     def ground_truth(self) -> dict:
         """What only the simulator knows, for oracle references (never for learning): ``measure()``
@@ -336,6 +352,17 @@ class SapienBinEnv(EnvBase):
 
     def _set_seed(self, seed: int | None) -> None:
         self._rng = np.random.default_rng(seed)
+
+
+def _answer_camera(camera: CameraSpec, size: int | None) -> CameraSpec | None:
+    """The answer camera: ``camera``'s view at ``size`` px a side; None when ``size`` is None or the same."""
+    if size is None or int(size) == camera.height:
+        return None
+    if isinstance(size, bool) or int(size) != size or size < camera.height or size % camera.height:
+        raise ValueError(f"answer_size must be a multiple of image_size ({camera.height}), e.g. {2 * camera.height}, "
+                         f"or null for none; got {size!r}")
+    size = int(size)
+    return CameraSpec(size, size, camera.fovy_deg, camera.distance, camera.near, camera.far)
 
 
 def _cell_fractions(masks: np.ndarray) -> np.ndarray:

@@ -232,6 +232,12 @@ class VQAModel(nn.Module):
         return self.pool in ("classes", "counts")
 
     @property
+    def frame_size(self) -> int | None:
+        """The side of the frames this VQA reads in full (the counting perception's input: 448 for one trained on
+        a 448-px render, whose rollouts need the env's answer camera); None: the env's frames, resized."""
+        return self.encoder.input_size if self.pool == "counts" else None
+
+    @property
     def invariant_features(self) -> bool:
         """Whether what ``encode_frames`` gives is the same for a rotated or mirrored image (counts are):
         then caching the 8 dihedral transforms of each frame buys nothing."""

@@ -27,9 +27,13 @@ class VQAEnsemble:
             if list(model.vocab) != list(first.vocab) or list(model.answers) != list(first.answers):
                 raise ValueError("the ensemble's VQAs were trained with different question or answer vocabularies: "
                                  "give VQAs trained on the same dataset")
+            if model.frame_size != first.frame_size:
+                raise ValueError(f"the ensemble's VQAs read frames of different sizes ({first.frame_size}, {model.frame_size} "
+                                 f"px): give VQAs on the same perception")
         self.members = list(members)
         self.answers, self.vocab = list(first.answers), list(first.vocab)
         self.meta = {**first.meta, "members": [m.meta for m in members]}
+        self.frame_size = first.frame_size
 
     @classmethod
     def load(cls, paths: list[str | Path]) -> "VQAEnsemble":

@@ -63,6 +63,8 @@ class BinWorld:
     bodies: list[sapien.physx.PhysxRigidDynamicComponent]
     camera: sapien.render.RenderCameraComponent | None
     bin: BinSpec
+    # a second camera at the same pose and field of view, rendering finer (``build_world(answer_camera=...)``)
+    answer_camera: sapien.render.RenderCameraComponent | None = None
 
     # ----------------------------------------------------------------------------- state
     def poses(self) -> np.ndarray:
@@ -112,12 +114,29 @@ class BinWorld:
             raise RuntimeError("this BinWorld was built without a camera (build_world(..., camera=...))")
         self.scene.update_render()
         self.camera.take_picture()
-        rgb = self.camera.get_picture("Color")[..., :3]
-        rgb = np.clip(rgb * 255 + 0.5, 0, 255).astype(np.uint8)
+        rgb = _rgb(self.camera)
         pos = self.camera.get_picture("Position")
         depth = np.where(pos[..., 3] < 1, -pos[..., 2], 0.0).astype(np.float32)
         seg = self.camera.get_picture("Segmentation")[..., 1].astype(np.int32)
         return rgb, depth, seg
+
+    def render_answer(self) -> np.ndarray:
+        """rgb uint8 [S, S, 3] of the answer camera (the same view as ``render``'s, finer)."""
+        if self.answer_camera is None:
+            raise RuntimeError("this BinWorld was built without an answer camera (build_world(..., answer_camera=...))")
+        self.scene.update_render()
+        self.answer_camera.take_picture()
+        return _rgb(self.answer_camera)
+
+
+def _rgb(camera: sapien.render.RenderCameraComponent) -> np.ndarray:
+    return np.clip(camera.get_picture("Color")[..., :3] * 255 + 0.5, 0, 255).astype(np.uint8)
+
+
+def _add_camera(scene: sapien.Scene, name: str, camera: CameraSpec) -> sapien.render.RenderCameraComponent:
+    cam = scene.add_camera(name, camera.width, camera.height, np.deg2rad(camera.fovy_deg), camera.near, camera.far)
+    cam.entity.pose = sapien.Pose(camera.position.astype(np.float32), camera.sapien_quaternion.astype(np.float32))
+    return cam
 
 
 def _static_box(scene: sapien.Scene, half_size, position, rgba, render: bool, kinematic: bool = False) -> sapien.Entity:
@@ -170,10 +189,14 @@ def build_world(
     *,
     bin_spec: BinSpec = BinSpec(),
     camera: CameraSpec | None = None,
+    answer_camera: CameraSpec | None = None,
     asleep: bool = True,
 ) -> BinWorld:
     """A fresh scene with ``assets`` at ``poses`` [N, 7]. With ``camera`` it renders (needs Vulkan);
-    without, it is physics only. ``asleep`` puts the objects to sleep (settled scenes stay still)."""
+    without, it is physics only. ``answer_camera``: a second camera (``BinWorld.render_answer``), e.g. the
+    same view at a finer resolution. ``asleep`` puts the objects to sleep (settled scenes stay still)."""
+    if answer_camera is not None and camera is None:
+        raise ValueError("answer_camera needs camera: a physics-only world renders nothing")
     render = camera is not None
     if render:
         _keep_shaders_alive()
@@ -187,11 +210,9 @@ def build_world(
     _static_box(scene, [1.0, 1.0, 0.05], [0, 0, -0.05], FLOOR_COLOR, render)   # floor top at z = 0
     _square_walls(scene, (0.0, 0.0), bin_spec.inner_size, bin_spec.wall_height, bin_spec.wall_thickness, render)
 
-    cam = None
-    if render:
-        cam = scene.add_camera("top", camera.width, camera.height, np.deg2rad(camera.fovy_deg), camera.near, camera.far)
-        cam.entity.pose = sapien.Pose(camera.position.astype(np.float32), camera.sapien_quaternion.astype(np.float32))
-    world = BinWorld(scene, [], [], [], cam, bin_spec)
+    cam = _add_camera(scene, "top", camera) if render else None
+    answer = _add_camera(scene, "answer", answer_camera) if answer_camera is not None else None
+    world = BinWorld(scene, [], [], [], cam, bin_spec, answer)
     for asset, pose in zip(assets, np.asarray(poses, dtype=np.float64)):
         add_object(world, asset, pose)
     if asleep:

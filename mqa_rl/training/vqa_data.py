@@ -1,7 +1,8 @@
 """The VQA's training data, read from an ``EpisodeStore`` of rollouts.
 
 * ``load_answering_records``: the records (question, answer, type, level, scene, ...) with or without
-  the two frames' rgb.
+  the two frames' rgb; ``frame_keys`` says which stored frames a VQA reading ``size``-px images takes (the
+  answer camera's where the rollouts hold them at that size).
 * ``encode_store``: with a frozen encoder, its features of both frames are computed once, chunk by
   chunk from the memmap (the images never all sit in memory), optionally for all 8 dihedral
   transforms of the images: the camera looks straight down on a square bin, so a rotated or
@@ -30,25 +31,54 @@ from mqa_rl.transforms.dihedral import DIHEDRAL, dihedral
 RECORD_KEYS = (keys.QUESTION, keys.ANSWER_LABEL, keys.TYPE_LABEL, keys.LEVEL, keys.SCENE, keys.QUESTION_ID,
                keys.PUSHES, keys.STOPPED, keys.CHI_START, keys.CHI_END)
 IMAGE_KEYS = (keys.FIRST_RGB, keys.LAST_RGB)
-def load_answering_records(store: str | Path, *, images: bool = True, require_complete: bool = True) -> TensorDict:
-    """Records [N] of a rollout store, sorted by slot; with ``images`` both frames' rgb (uint8)."""
-    return load_records(store, (*RECORD_KEYS, *(IMAGE_KEYS if images else ())), require_complete=require_complete)
+ANSWER_IMAGE_KEYS = (keys.FIRST_ANSWER_RGB, keys.LAST_ANSWER_RGB)
+
+
+def frame_keys(store: str | Path, size: int | None) -> tuple:
+    """The stored (I_start, I_stop) a VQA whose encoder reads ``size``-px images takes: the answer camera's when
+    the rollouts hold them at that size (``collection.env.answer_size``), else the env's (resized by the encoder
+    when smaller; None: the env's). A finer ``size`` than the store holds is refused: enlarging a 224-px render
+    adds no detail (docs/perception.md, "Resolution")."""
+    if size is None:
+        return IMAGE_KEYS
+    env = read_meta(store).get("env", {})
+    if env.get("answer_size") == int(size):
+        return ANSWER_IMAGE_KEYS
+    if int(size) > int(env.get("image_size", size)):
+        held = f"{env['image_size']} px" + (f" and {env['answer_size']}-px answer frames" if env.get("answer_size") else "")
+        raise ValueError(f"the VQA reads {size}-px frames; the rollouts in {store} hold {held}: collect them with "
+                         f"collection.env.answer_size={size} (python recipes/collect_rollouts.py ... "
+                         f"collection.env.answer_size={size} overwrite=true)")
+    return IMAGE_KEYS
+
+
+def load_answering_records(store: str | Path, *, images: bool = True, size: int | None = None,
+                           require_complete: bool = True) -> TensorDict:
+    """Records [N] of a rollout store, sorted by slot; with ``images`` both frames' rgb (uint8) under
+    ``FIRST_RGB`` / ``LAST_RGB``: the frames ``frame_keys(store, size)`` picks."""
+    chosen = frame_keys(store, size) if images else ()
+    records = load_records(store, (*RECORD_KEYS, *chosen), require_complete=require_complete)
+    for key, name in zip(chosen, IMAGE_KEYS):
+        if key != name:
+            records.rename_key_(key, name)
+    return records
 
 
 @torch.no_grad()
-def encode_store(store: str | Path, encode, *, transforms: int = 1, batch_size: int = 64,
+def encode_store(store: str | Path, encode, *, transforms: int = 1, batch_size: int = 64, size: int | None = None,
                  require_complete: bool = True, progress=None) -> TensorDict:
     """Records [N] with ``FIRST_FEATURES`` / ``LAST_FEATURES`` [N, transforms, C, h, w] (float16) computed
     by ``encode`` (uint8 [B, 3, H, W] → [B, C, h, w], e.g. ``VQAModel.encode_frames`` in eval mode) for
-    the first ``transforms`` dihedral transforms of each frame."""
+    the first ``transforms`` dihedral transforms of each frame (the frames ``frame_keys(store, size)`` picks)."""
     records = load_answering_records(store, images=False, require_complete=require_complete)
+    chosen = frame_keys(store, size)
     order = {int(s): i for i, s in enumerate(records.get(keys.SLOT))}
     feats = {key: None for key in IMAGE_KEYS}
     for path in chunk_paths(store):
         chunk = read_chunk(path)
         rows = torch.tensor([order[int(s)] for s in chunk.get(keys.SLOT)])
-        for key, out_key in zip(IMAGE_KEYS, (keys.FIRST_FEATURES, keys.LAST_FEATURES)):
-            images = chunk.get(key)
+        for key, stored in zip(IMAGE_KEYS, chosen):
+            images = chunk.get(stored)
             for start in range(0, images.shape[0], batch_size):
                 block = images[start:start + batch_size].clone()
                 per_t = [encode(dihedral(block, k)).to(torch.float16) for k in range(transforms)]

@@ -12,6 +12,7 @@ from mqa_rl.collectors.store import load_records
 from mqa_rl.losses.perception import PerceptionLoss, countable_counts, crop_counts, perception_targets, slot_pixels
 from mqa_rl.modules import vote_counting
 from mqa_rl.modules.perception import CountingPerception, load_perception, save_perception
+from mqa_rl.modules.vqa_ensemble import VQAEnsemble
 from mqa_rl.modules.vqa import VQAModel, load_vqa, save_vqa
 from mqa_rl.transforms.episode_stats import COUNTABLE_PX
 
@@ -154,6 +155,12 @@ def test_counting_vqa_answers_through_the_public_contract_and_reloads(tmp_path):
     assert torch.allclose(again.answer_probs(tokens, img, img), probs)
     with pytest.raises(ValueError, match="counting perception"):
         VQAModel(vocab, ["0"], pool="counts")
+    # the frames it reads in full: its perception's input (a 448-px perception wants the answer camera's frames)
+    fine = VQAModel(vocab, ["0", "1", "2", "3"], pool="counts", cell_heads=2,
+                    perception=CountingPerception(K, widths=(8, 8, 16, 16), image_size=448).config())
+    assert model.frame_size == 112 and fine.frame_size == 448 and VQAModel(vocab, ["0"]).frame_size is None
+    with pytest.raises(ValueError, match="frames of different sizes"):
+        VQAEnsemble([model, fine])
 
 
 def test_a_fine_tuned_counting_vqa_reads_the_frozen_numbers_and_sends_gradients_to_density_and_classes():

@@ -190,3 +190,35 @@ def test_a_run_trained_with_push_memory_is_rolled_out_with_it(small_dataset, sma
     for t in range(1, 4):
         assert not traj[keys.ACTION_MASK][t, taken[:t]].any()
     env.close()
+
+
+def test_the_answer_camera_stores_finer_frames_of_the_same_view_and_a_finer_vqa_takes_them(small_dataset, random_store,
+                                                                                             tmp_path):
+    """``answer_size``: I_start / I_stop through a second camera at 448 px beside the env's 224-px frames (the push
+    grid stays at 224); the answer frames are the same view (their 2 × 2 means ≈ the env's render); a VQA reading
+    448-px frames takes them, one reading 224 px the env's, and a finer VQA than a store holds is refused."""
+    from mqa_rl.training.vqa_data import ANSWER_IMAGE_KEYS, IMAGE_KEYS, frame_keys, load_answering_records
+    out = tmp_path / "answer448"
+    collect_rollouts(out, dataset=small_dataset, **{**PLAN, "policy": {"kind": "none"}, "answer_size": 448,
+                                                    "store_depth": False})
+    r = load_records(out)
+    assert json.loads((out / "meta.json").read_text())["env"]["answer_size"] == 448
+    for frame in (keys.FIRST, keys.LAST):
+        fine, env_rgb = r[(frame, keys.ANSWER_RGB)], r[(frame, keys.RGB)]
+        assert fine.dtype == torch.uint8 and fine.shape[1:] == (3, 448, 448) and env_rgb.shape[1:] == (3, 224, 224)
+        pooled = torch.nn.functional.avg_pool2d(fine.float(), 2)
+        assert (pooled - env_rgb.float()).abs().mean() < 3.0, frame
+    assert frame_keys(out, 448) == ANSWER_IMAGE_KEYS
+    assert frame_keys(out, 224) == IMAGE_KEYS and frame_keys(out, None) == IMAGE_KEYS
+    assert load_answering_records(out, size=448)[keys.FIRST_RGB].shape[-1] == 448
+    assert torch.equal(load_answering_records(out, size=224)[keys.FIRST_RGB], r[keys.FIRST_RGB])
+    for store, size in ((out, 896), (random_store[0], 448)):
+        with pytest.raises(ValueError, match=f"collection.env.answer_size={size}"):
+            frame_keys(store, size)
+
+
+@pytest.mark.parametrize("size", [300, 112, True, 448.5])
+def test_an_answer_size_off_the_env_grid_is_refused(small_dataset, size):
+    from mqa_rl.envs.sapien_bin import SapienBinEnv
+    with pytest.raises(ValueError, match="answer_size must be a multiple of image_size"):
+        SapienBinEnv(small_dataset, split=None, answer_size=size)
