@@ -46,7 +46,8 @@ from mqa_rl.training.resume_guard import RESUMABLE, refuse_changed_config
 from mqa_rl.training.run_dir import RunLock, positive_ints, refuse_unresumable
 from mqa_rl.training.run_logger import RunLogger, trim_scalars
 from mqa_rl.training.signals import exit_on_sigterm
-from mqa_rl.training.vqa_data import Batches, encode_store, load_answering_records, question_class_labels, scene_split
+from mqa_rl.training.vqa_data import (Batches, encode_store, load_answering_records, question_class_labels, scene_split,
+                                     encoder_fingerprint)
 from mqa_rl.transforms.dihedral import DIHEDRAL
 
 # validation metric that picks the kept checkpoint -> its score (higher is better)
@@ -220,7 +221,8 @@ def _train(cfg: DictConfig, out: Path) -> dict:
         bar = tqdm(total=int(meta["slots"]) * 2, unit="frame", desc=f"encoding ×{transforms}", disable=not cfg.logger.progress)
         model.eval()
         records = encode_store(cfg.rollouts, lambda x: model.encode_frames(x.to(device)).cpu(), transforms=transforms,
-                               size=model.frame_size, progress=bar)
+                               size=model.frame_size, progress=bar,
+                               cache_key=encoder_fingerprint(model.encoder) if model.invariant_features else None)
         bar.close()
         model.train()
     else:

@@ -49,6 +49,7 @@ raise ``ValueError`` for a word or token outside the model's vocabulary.
 
 from __future__ import annotations
 
+import contextlib
 import io
 from pathlib import Path
 
@@ -293,22 +294,35 @@ class VQAModel(nn.Module):
 
         Images of another size are resized to the model's (224 px). Runs in eval mode, without gradients."""
         self.check_tokens(question_tokens)
-        b = question_tokens.shape[0]
+        return self.answer_probs_from_features(question_tokens, *self.frame_features(first_rgb, last_rgb, question_tokens.shape[0]))
+
+    def frame_features(self, first_rgb: torch.Tensor, last_rgb: torch.Tensor, batch: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """``encode_frames`` of uint8 images [B, H, W, 3] (checked) in eval mode, without gradients: what
+        ``answer_probs_from_features`` reads (VQAs sharing one frozen perception compute it once)."""
         for name, img in (("first_rgb", first_rgb), ("last_rgb", last_rgb)):
-            if (not isinstance(img, torch.Tensor) or img.dtype != torch.uint8 or img.dim() != 4 or img.shape[0] != b
+            if (not isinstance(img, torch.Tensor) or img.dtype != torch.uint8 or img.dim() != 4 or img.shape[0] != batch
                     or img.shape[-1] != 3):
-                raise ValueError(f"{name} must be a uint8 tensor [B={b}, H, W, 3]; got "
+                raise ValueError(f"{name} must be a uint8 tensor [B={batch}, H, W, 3]; got "
                                  f"{getattr(img, 'dtype', type(img))} {tuple(getattr(img, 'shape', ()))}")
         device = next(self.parameters()).device
+        with self._evaluating(), torch.no_grad():
+            return tuple(self.encode_frames(img.permute(0, 3, 1, 2).to(device)) for img in (first_rgb, last_rgb))
+
+    def answer_probs_from_features(self, question_tokens: torch.Tensor, first: torch.Tensor, last: torch.Tensor) -> torch.Tensor:
+        """``answer_probs`` from ``frame_features`` (tokens checked by the caller)."""
+        device = next(self.parameters()).device
+        with self._evaluating(), torch.no_grad():
+            logits, _ = self.forward_features(question_tokens.to(device), first, last)
+        return F.softmax(logits.float(), -1).cpu()
+
+    @contextlib.contextmanager
+    def _evaluating(self):
         was_training = self.training
         self.eval()
         try:
-            with torch.no_grad():
-                logits, _ = self(question_tokens.to(device), first_rgb.permute(0, 3, 1, 2).to(device),
-                                 last_rgb.permute(0, 3, 1, 2).to(device))
+            yield
         finally:
             self.train(was_training)
-        return F.softmax(logits.float(), -1).cpu()
 
     def check_dataset(self, dataset) -> None:
         """``ValueError`` unless ``dataset`` (an ``MQADataset``) tokenises questions and names answers as this model."""

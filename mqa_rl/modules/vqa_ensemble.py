@@ -34,6 +34,9 @@ class VQAEnsemble:
         self.answers, self.vocab = list(first.answers), list(first.vocab)
         self.meta = {**first.meta, "members": [m.meta for m in members]}
         self.frame_size = first.frame_size
+        # members on one frozen perception (seeds of a counting head) read the same features: computed once
+        self.shared_encoder = all(m.pool == "counts" and m.config["freeze_encoder"] for m in members) and all(
+            _same_weights(m.encoder, first.encoder) for m in members[1:])
 
     @classmethod
     def load(cls, paths: list[str | Path]) -> "VQAEnsemble":
@@ -48,4 +51,14 @@ class VQAEnsemble:
 
     def answer_probs(self, question_tokens: torch.Tensor, first_rgb: torch.Tensor, last_rgb: torch.Tensor) -> torch.Tensor:
         """P(answer) [B, len(answers)]: the members' probabilities averaged."""
-        return torch.stack([m.answer_probs(question_tokens, first_rgb, last_rgb) for m in self.members]).mean(0)
+        if not self.shared_encoder:
+            return torch.stack([m.answer_probs(question_tokens, first_rgb, last_rgb) for m in self.members]).mean(0)
+        for m in self.members:
+            m.check_tokens(question_tokens)
+        features = self.members[0].frame_features(first_rgb, last_rgb, question_tokens.shape[0])
+        return torch.stack([m.answer_probs_from_features(question_tokens, *features) for m in self.members]).mean(0)
+
+
+def _same_weights(a: torch.nn.Module, b: torch.nn.Module) -> bool:
+    sa, sb = a.state_dict(), b.state_dict()
+    return sa.keys() == sb.keys() and all(torch.equal(sa[k], sb[k]) for k in sa)

@@ -160,7 +160,16 @@ def test_counting_vqa_answers_through_the_public_contract_and_reloads(tmp_path):
                     perception=CountingPerception(K, widths=(8, 8, 16, 16), image_size=448).config())
     assert model.frame_size == 112 and fine.frame_size == 448 and VQAModel(vocab, ["0"]).frame_size is None
     with pytest.raises(ValueError, match="frames of different sizes"):
-        VQAEnsemble([model, fine])
+        VQAEnsemble([again, load_vqa(save_vqa(fine, tmp_path / "fine.pt"))])
+    # seeds of a head on one frozen perception answer together from one pass of it, as each alone would
+    seed1 = VQAModel(vocab, ["0", "1", "2", "3"], pool="counts", cell_heads=2, perception=perception.config())
+    seed1.encoder.load_state_dict(perception.state_dict())
+    seed1 = load_vqa(save_vqa(seed1, tmp_path / "seed1.pt"))
+    pair = VQAEnsemble([again, seed1])
+    alone = (again.answer_probs(tokens, img, img) + seed1.answer_probs(tokens, img, img)) / 2
+    assert pair.shared_encoder and torch.allclose(pair.answer_probs(tokens, img, img), alone, atol=1e-6)
+    scratch = VQAModel(vocab, ["0", "1", "2", "3"], pool="counts", cell_heads=2, perception=perception.config())
+    assert not VQAEnsemble([again, load_vqa(save_vqa(scratch, tmp_path / "scratch.pt"))]).shared_encoder
 
 
 def test_a_fine_tuned_counting_vqa_reads_the_frozen_numbers_and_sends_gradients_to_density_and_classes():

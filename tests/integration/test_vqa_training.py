@@ -2,6 +2,7 @@
 frames, and the train_vqa / pretrain recipes write loadable models, log, and resume."""
 
 import csv
+import shutil
 
 import pytest
 import torch
@@ -16,7 +17,7 @@ from mqa_rl.losses.vqa import VQALoss
 from mqa_rl.modules.vqa import VQAModel, load_vqa, vqa_module
 from mqa_rl.modules.vqa_encoder import FrameEncoder, PretrainHeads, load_encoder, save_encoder
 from mqa_rl.training.frame_pack import load_frame_pack
-from mqa_rl.training.vqa_data import Batches, encode_store, pretraining_frames
+from mqa_rl.training.vqa_data import Batches, encode_store, encoder_fingerprint, pretraining_frames
 from mqa_rl.transforms.dihedral import dihedral
 from mqa_rl.verified_checkpoint import CheckpointCorrupt
 
@@ -112,6 +113,19 @@ def test_encoder_pretrains_on_a_few_frames(small_dataset, answering_root, tmp_pa
     assert records[keys.FIRST_FEATURES].shape == (records.shape[0], 2, 32, 10, 10)
     batch = Batches(records, 4, augment=True).sample()
     assert batch[keys.FIRST_FEATURES].shape == (4, 32, 10, 10) and batch[keys.FIRST_FEATURES].dtype == torch.float32
+    # with a cache key the features are kept beside the store and read back, not recomputed; another key recomputes
+    key, store = encoder_fingerprint(model.encoder), shutil.copytree(store, tmp_path / "store")
+    cached = encode_store(store, model.encode_frames, transforms=2, cache_key=key)
+    assert torch.equal(cached[keys.FIRST_FEATURES], records[keys.FIRST_FEATURES]) and len(list((store / "features").iterdir())) == 1
+
+    def fails(x):
+        raise AssertionError("recomputed although cached")
+    again = encode_store(store, fails, transforms=2, cache_key=key)
+    assert torch.equal(again[keys.LAST_FEATURES], records[keys.LAST_FEATURES])
+    with pytest.raises(AssertionError, match="recomputed"):
+        encode_store(store, fails, transforms=2, cache_key="0" * 64)
+    other = VQAModel(small_dataset.vocab.itos, small_dataset.answers)
+    assert encoder_fingerprint(other.encoder) != key
 
 
 def _steps(run, name):
@@ -289,7 +303,6 @@ def test_pretraining_frames_mix_stores_of_another_dataset_of_the_same_objects(sm
     """More scenes to learn to see from: a store collected on another dataset (same object library) is read
     with its own scenes, its scene ids kept apart; a store whose dataset is gone is refused, saying why."""
     import json
-    import shutil
 
     from mqa_rl.training.vqa_data import SCENE_OFFSET
 
