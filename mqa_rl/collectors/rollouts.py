@@ -86,11 +86,6 @@ def object_map(env: SapienBinEnv) -> torch.Tensor:
     return torch.from_numpy(lut[seg])
 
 
-def answer_image(env: SapienBinEnv) -> torch.Tensor | None:
-    """uint8 [3, S, S] of the env's answer camera (``answer_size``), or None when it has none."""
-    return env.answer_image() if env.answer_camera is not None else None
-
-
 def _frame(td, store_depth: bool, omap: torch.Tensor | None, answer: torch.Tensor | None) -> TensorDict:
     out = {keys.RGB: td.get(keys.RGB), keys.FRAME_OVERLAP: td.get(keys.OVERLAP),
            keys.FRAME_VISIBLE: td.get(keys.VISIBLE_AREA), keys.FRAME_FULL: td.get(keys.FULL_AREA)}
@@ -116,7 +111,7 @@ def run_question_episode(env: SapienBinEnv, policy, exploration, question_index:
     torch.manual_seed(episode_seed(seed, slot))
     td = env.reset(question_id=question.id)
     first_map = object_map(env) if store_object_map else None
-    first_answer = answer_image(env)
+    first_answer = env.answer_image()
     with torch.no_grad(), set_exploration_type(exploration):
         traj = env.rollout(max_pushes + 1, policy, auto_reset=False, tensordict=td, break_when_any_done=True)
     if not bool(traj["next", "done"][-1].item()):
@@ -124,7 +119,7 @@ def run_question_episode(env: SapienBinEnv, policy, exploration, question_index:
                            f"max_pushes larger than {max_pushes}?")
     first, last = traj[0], traj["next"][-1]
     last_map = object_map(env) if store_object_map else None
-    last_answer = answer_image(env)
+    last_answer = env.answer_image()
     scene = env.dataset.scene(question.scene_id)
     scalar = lambda v, dtype=torch.int64: torch.as_tensor(v, dtype=dtype).reshape(())   # noqa: E731
     return TensorDict({

@@ -28,6 +28,7 @@ from mqa_rl.demo.scenes import SceneCatalog
 from mqa_rl.demo.sessions import EnvPool, PoolBusy, SessionFiles
 from mqa_rl.demo.vqa_adapter import VQARegistry
 from mqa_rl.envs.video import write_video
+from mqa_rl.modules.perception import RENDER_SIZE
 from mqa_rl.files import write_atomic
 from mqa_rl.transforms.mqa_env import make_mqa_env
 
@@ -80,6 +81,7 @@ class DemoBackend:
         reward = dict(cfg.reward)
         steps = int(reward.get("beta_horizon", 2000)) if cfg.beta_steps is None else int(cfg.beta_steps)
         self._beta_counter = torch.tensor(steps, dtype=torch.int64)
+        self.vqa = VQARegistry(cfg.vqa)         # before the simulators: a VQA reading finer frames adds their camera
         self.pool = EnvPool(self._make_env, cfg.sessions)
         env = self.pool.envs[0]
         td = env.reset(question_id=self.dataset.questions[0].id)       # shaders compiled here, once per server
@@ -89,7 +91,6 @@ class DemoBackend:
         self.policies = PolicyRegistry(cfg.runs, env, cfg.max_pushes)
         chosen = [n for n in self.policies.names if cfg.policy and cfg.policy in n]
         self.default_policy = (chosen or self.policies.trained or self.policies.names)[0]
-        self.vqa = VQARegistry(cfg.vqa)
         self.files = SessionFiles(tempfile.mkdtemp(prefix="mqa_demo_"))
         self.frames = SessionFiles(tempfile.mkdtemp(prefix="mqa_demo_frames_"))
         self.startup_s = time.perf_counter() - t0
@@ -98,7 +99,7 @@ class DemoBackend:
 
     def _make_env(self):
         return make_mqa_env(self.dataset, self.cfg.reward, counter=self._beta_counter, split=None,
-                            max_pushes=self.cfg.max_pushes)
+                            max_pushes=self.cfg.max_pushes, answer_size=self.vqa.answer_size(RENDER_SIZE))
 
     def status(self) -> str:
         """Markdown shown under the title: dataset, policies, VQA, and what is missing."""
@@ -164,7 +165,7 @@ class DemoBackend:
         yield update
 
     def _answer(self, question, vqa: str | None, last) -> tuple[dict[str, float] | None, str]:
-        result = self.vqa.answer(vqa, last.tokens, last.first_rgb, last.last_rgb)
+        result = self.vqa.answer(vqa, last.tokens, last.first_rgb, last.last_rgb, last.answer_frames)
         truth = f"**True answer: {question.answer}**"
         if isinstance(result, str):
             return None, f"{truth} · {result}"

@@ -40,6 +40,7 @@ class StepView:
     first_rgb: torch.Tensor | None = None     # uint8 [H, W, 3], on the last view
     last_rgb: torch.Tensor | None = None
     tokens: torch.Tensor | None = None        # question tokens [L], on the last view
+    answer_frames: tuple | None = None        # (I_start, I_stop) of the env's answer camera [S, S, 3], when it has one
 
 
 def _hwc(rgb: torch.Tensor) -> np.ndarray:
@@ -114,6 +115,7 @@ def play(env, policy, question_id: str, question_text: str) -> Iterator[StepView
     with torch.no_grad():
         td = env.reset(question_id=question_id)
     first = td[keys.RGB].clone()
+    first_answer = env.answer_image()
     tokens = td[keys.QUESTION].clone()
     yield StepView(0, annotate(_hwc(first), SCALE, [question_text, "step 0: first image"]), table_row(0, td, None))
     steps = []
@@ -127,6 +129,8 @@ def play(env, policy, question_id: str, question_text: str) -> Iterator[StepView
         if bool(nxt["done"].item()):
             view.done, view.rollout = True, torch.stack(steps, 0)
             view.first_rgb, view.last_rgb, view.tokens = _t(first), _t(nxt[keys.RGB]), tokens
+            if first_answer is not None:
+                view.answer_frames = (_t(first_answer), _t(env.answer_image()))
             yield view
             return
         yield view

@@ -90,12 +90,21 @@ class VQARegistry:
             return f"{NO_VQA}: " + "; ".join(f"{p} unusable ({why})" for p, why in self.problems)
         return f"{NO_VQA}: none configured; {TRAIN_HINT}"
 
-    def answer(self, name: str | None, tokens, first_rgb, last_rgb) -> dict[str, float] | str:
-        """``{answer: probability}``, or the message saying why there is no answer."""
+    def answer_size(self, image_size: int) -> int | None:
+        """The answer camera the demo's env needs: the finest frames a VQA reads beyond the env's ``image_size``."""
+        finer = [m.frame_size for m in self.models.values() if (getattr(m, "frame_size", None) or 0) > image_size]
+        return max(finer) if finer else None
+
+    def answer(self, name: str | None, tokens, first_rgb, last_rgb, answer_frames=None) -> dict[str, float] | str:
+        """``{answer: probability}``, or the message saying why there is no answer. ``answer_frames``: (I_start,
+        I_stop) of the env's answer camera, read instead by a VQA whose frames are that size."""
         if not name or name not in self.models:
             return self.missing_reason() if not self.models else f"{NO_VQA}: none chosen (pick one of {self.names})"
+        model = self.models[name]
+        if answer_frames is not None and getattr(model, "frame_size", None) == answer_frames[0].shape[0]:
+            first_rgb, last_rgb = answer_frames
         try:
-            return answer_probs(self.models[name], tokens, first_rgb, last_rgb)
+            return answer_probs(model, tokens, first_rgb, last_rgb)
         except Exception as error:                            # noqa: BLE001 - a broken model must not end the page
             log.exception("VQA %s failed", name)
             return f"the VQA {name} failed on this episode: {type(error).__name__}: {error}"

@@ -258,13 +258,13 @@ class SapienBinEnv(EnvBase):
         overlap = overlap_rate(torch.from_numpy(visible), torch.from_numpy(full)).numpy()
         return {"rgb": rgb, "depth": depth, "seg": seg, "poses": poses, "visible": visible, "full": full, "overlap": overlap}
 
-    def answer_image(self) -> torch.Tensor:
-        """uint8 [3, S, S]: the scene as it stands through the answer camera (``answer_size`` px a side; without
-        one, the last observation's ``rgb``). The frames the answering half reads (I_start, I_stop)."""
+    def answer_image(self) -> torch.Tensor | None:
+        """uint8 [3, S, S]: the scene as it stands through the answer camera (``answer_size`` px a side), the frames
+        the answering half reads (I_start, I_stop); None when the env has no answer camera (then they are ``rgb``)."""
         if self.world is None:
             raise RuntimeError("call reset() before answer_image()")
         if self.answer_camera is None:
-            return self._last.get(keys.RGB).clone()
+            return None
         return torch.from_numpy(np.ascontiguousarray(self.world.render_answer().transpose(2, 0, 1)))
 
     def ground_truth(self) -> dict:

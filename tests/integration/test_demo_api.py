@@ -231,6 +231,29 @@ def test_vqa_answer_is_shown_with_probabilities(served, monkeypatch):
     assert "guess" not in last.answer_text                      # no types recorded: nothing to warn about
 
 
+def test_a_vqa_reading_finer_frames_gets_the_answer_cameras_and_others_the_envs(small_dataset):
+    """A VQA whose perception reads 448 px makes the demo's env add the answer camera; the episode's last view
+    carries its I_start / I_stop, which that VQA reads, while a 224-px VQA reads the env's frames."""
+    from mqa_rl.demo import vqa_adapter
+    from mqa_rl.demo.episode import play
+    from mqa_rl.modules.random_policy import RandomMQAPolicy
+    from mqa_rl.transforms.mqa_env import make_mqa_env
+
+    fine, coarse = StandInVQA(), StandInVQA()
+    fine.frame_size, coarse.frame_size = 448, 224
+    registry = vqa_adapter.VQARegistry([])
+    registry.models = {"fine": fine, "coarse": coarse}
+    assert registry.answer_size(224) == 448 and vqa_adapter.VQARegistry([]).answer_size(224) is None
+    env = make_mqa_env(small_dataset, split=None, max_pushes=1, answer_size=registry.answer_size(224))
+    q = small_dataset.select("train", None, ["counting"])[0]
+    last = list(play(env, RandomMQAPolicy(max_pushes=1, seed=0), q.id, q.text))[-1]
+    assert last.answer_frames[0].shape == (448, 448, 3) and last.first_rgb.shape == (224, 224, 3)
+    for name, model, side in (("fine", fine, 448), ("coarse", coarse, 224)):
+        assert isinstance(registry.answer(name, last.tokens, last.first_rgb, last.last_rgb, last.answer_frames), dict)
+        assert model.seen[2] == model.seen[4] == (1, side, side, 3), name
+    env.close()
+
+
 def test_a_question_type_the_vqa_never_learnt_is_flagged(served, monkeypatch):
     """A VQA trained on COUNTING only still answers an EXISTENCE question, and the page says it is a guess."""
     from mqa_rl.demo import vqa_adapter
