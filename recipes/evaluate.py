@@ -92,6 +92,10 @@ def evaluate_system(cfg: DictConfig, ds: MQADataset, name: str, plan_sha: str) -
     absent = [p for p in vqa_paths if not p.exists()]
     if absent:
         return missing(f"no VQA at {absent[0]}", train_cmd), None, None
+    model = load_vqa(vqa_paths[0]) if len(vqa_paths) == 1 else VQAEnsemble.load(vqa_paths)
+    collection = OmegaConf.to_container(cfg.collection)
+    if (model.frame_size or 0) > int(collection["env"]["image_size"]):   # the VQA reads the answer camera's frames
+        collection["env"]["answer_size"] = model.frame_size
     t0 = time.perf_counter()
     try:
         records = load_records(store, EVAL_KEYS)
@@ -100,8 +104,7 @@ def evaluate_system(cfg: DictConfig, ds: MQADataset, name: str, plan_sha: str) -
             return missing(f"no complete test rollouts ({error})", f"python recipes/collect_rollouts.py system={name} "
                                                                    f"questions={q} 'splits=[test]'"), None, None
         collect_split(store, "test", dataset=ds, policy=spec, questions=OmegaConf.to_container(cfg.questions),
-                      collection=OmegaConf.to_container(cfg.collection), progress=cfg.progress,
-                      ray_address=cfg.ray.address)
+                      collection=collection, progress=cfg.progress, ray_address=cfg.ray.address)
         records = load_records(store, EVAL_KEYS)
     collect_seconds = time.perf_counter() - t0
     if read_meta(store)["plan"]["questions_sha256"] != plan_sha:
@@ -110,7 +113,6 @@ def evaluate_system(cfg: DictConfig, ds: MQADataset, name: str, plan_sha: str) -
     if read_meta(store)["policy"] != spec:
         warnings.warn(f"{store} was collected with policy {read_meta(store)['policy']}, the config now says {spec}",
                       stacklevel=2)
-    model = load_vqa(vqa_paths[0]) if len(vqa_paths) == 1 else VQAEnsemble.load(vqa_paths)
     model.check_dataset(ds)
     members = model.meta.get("members", [model.meta])
     for path, meta in zip(vqa_paths, members):
@@ -120,8 +122,11 @@ def evaluate_system(cfg: DictConfig, ds: MQADataset, name: str, plan_sha: str) -
                              f"test split, so it would be scored on what it learnt; train it on the training split's rollouts")
         if meta.get("system") not in (None, name):
             warnings.warn(f"{path} was trained on the rollouts of {meta['system']!r}, not {name!r}", stacklevel=2)
-    # the frames this VQA reads: the answer camera's where its perception reads finer than the env renders
-    records.update(load_answering_records(store, size=model.frame_size).select(*IMAGE_KEYS))
+    try:   # the frames this VQA reads: the answer camera's where its perception reads finer than the env renders
+        records.update(load_answering_records(store, size=model.frame_size).select(*IMAGE_KEYS))
+    except ValueError as error:
+        return missing(str(error), f"python recipes/collect_rollouts.py system={name} questions={q} 'splits=[test]' "
+                                   f"collection.env.answer_size={model.frame_size} overwrite=true"), None, None
     t1 = time.perf_counter()
     right = ans.predict(model, records, cfg.batch_size) == records.get(keys.ANSWER_LABEL)
     counting = records.get(keys.TYPE_LABEL) == QUESTION_TYPES.index("counting")

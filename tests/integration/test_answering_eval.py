@@ -210,3 +210,25 @@ def test_the_goals_are_checked_for_each_family_of_reward_variants():
     assert lines[3].endswith("every DQfD variant above random")
     assert verdict({"systems": {"random": system(0.4, 0.0)}})[0].startswith("no DQN system evaluated yet")
     assert "dqfd_global_local" in verdict({"systems": {"random": system(0.4, 0.0)}})[0]   # says which names count
+
+
+def test_evaluate_collects_the_answer_cameras_frames_a_finer_vqa_reads(small_dataset, answering_root, tmp_path):
+    """A VQA on a perception that reads 448 px: evaluate.py collects its missing test rollouts with the answer camera
+    and answers from its frames; a store of 224-px frames only is reported missing with the command that fixes it."""
+    from mqa_rl.modules.perception import CountingPerception
+    root, overrides = answering_root
+    perception = CountingPerception(1 + len(small_dataset.classes), widths=(8, 8, 16, 16), image_size=448)
+    model = VQAModel(small_dataset.vocab.itos, small_dataset.answers, pool="counts", cell_heads=2,
+                     perception=perception.config())
+    save_vqa(model, tmp_path / "vqa" / "no_manipulation" / "vqa.pt", {"system": "no_manipulation", "rollouts_split": "train"})
+    evaluate = load_recipe("evaluate")
+    base = [*overrides, "progress=false", "fig7=false", "report=[no_manipulation]", f"vqa_dir={tmp_path / 'vqa'}"]
+    results = evaluate.evaluate(compose_recipe_config("evaluate", [*base, "collect_missing=false",
+                                                                   f"out_dir={tmp_path / 'r224'}"]))
+    gone = results["systems"]["no_manipulation"]
+    assert gone["status"] == "missing" and "collection.env.answer_size=448" in gone["command"]
+    results = evaluate.evaluate(compose_recipe_config("evaluate", [*base, f"rollouts_dir={tmp_path / 'rollouts'}",
+                                                                   f"out_dir={tmp_path / 'r448'}"]))
+    assert results["systems"]["no_manipulation"]["status"] == "ok"
+    meta = json.loads((tmp_path / "rollouts" / "no_manipulation" / "test" / "meta.json").read_text())
+    assert meta["env"]["answer_size"] == 448
