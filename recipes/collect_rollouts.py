@@ -4,6 +4,7 @@
     python recipes/collect_rollouts.py system=dqn_local              # greedy DQN(R_l) from runs/local
     python recipes/collect_rollouts.py system=privileged splits=[test]
     python recipes/collect_rollouts.py system=random questions=all_types    # all four question types
+    python recipes/collect_rollouts.py system=privileged collection.env.answer_size=448   # + I_start / I_stop at 448 px
     python recipes/collect_rollouts.py system=random collection.backend=ray collection.workers=8 ray.address=auto
 
 Writes ``${root}/rollouts/<questions>/<system>/<split>`` (an ``EpisodeStore``: memmap chunks written
