@@ -90,12 +90,15 @@ def encode_store(store: str | Path, encode, *, transforms: int = 1, batch_size: 
 
     ``cache_key`` (e.g. ``encoder_fingerprint`` of a frozen encoder): the features are kept in
     ``<store>/features/`` and read back by the next call with the same key, frames and records (a head's
-    seeds share one pass of a perception that reads 448-px frames at ~5 frames/s on 2 cores)."""
+    seeds share one pass of a perception that reads 448-px frames at ~6 frames/s on 2 cores)."""
     records = load_answering_records(store, images=False, require_complete=require_complete)
     chosen = frame_keys(store, size)
     cache = Path(store) / FEATURE_CACHE / f"{cache_key[:16]}-{'-'.join(chosen[0])}-t{transforms}.pt" if cache_key else None
     if cache is not None and cache.exists():
-        saved = torch.load(cache, weights_only=True)
+        try:
+            saved = torch.load(cache, weights_only=True)
+        except Exception:                  # noqa: BLE001 - an unreadable cache is recomputed and replaced
+            saved = {}
         if saved.get("key") == cache_key and torch.equal(saved["slots"], records.get(keys.SLOT)):
             records.set(keys.FIRST_FEATURES, saved["first"])
             records.set(keys.LAST_FEATURES, saved["last"])

@@ -124,6 +124,11 @@ def test_encoder_pretrains_on_a_few_frames(small_dataset, answering_root, tmp_pa
     assert torch.equal(again[keys.LAST_FEATURES], records[keys.LAST_FEATURES])
     with pytest.raises(AssertionError, match="recomputed"):
         encode_store(store, fails, transforms=2, cache_key="0" * 64)
+    cache = next((store / "features").iterdir())
+    cache.write_bytes(cache.read_bytes()[:100])                    # a damaged cache is recomputed and replaced
+    assert torch.equal(encode_store(store, model.encode_frames, transforms=2, cache_key=key)[keys.FIRST_FEATURES],
+                       records[keys.FIRST_FEATURES])
+    assert torch.equal(encode_store(store, fails, transforms=2, cache_key=key)[keys.FIRST_FEATURES], records[keys.FIRST_FEATURES])
     other = VQAModel(small_dataset.vocab.itos, small_dataset.answers)
     assert encoder_fingerprint(other.encoder) != key
 
