@@ -43,7 +43,7 @@ from mqa_rl.evaluation import answering as ans
 from mqa_rl.evaluation import answering_report as report
 from mqa_rl.files import write_atomic
 from mqa_rl.modules.frozen_policies import resolve_checkpoint, system_spec
-from mqa_rl.modules.vqa import CHECKPOINT_NAME, load_vqa
+from mqa_rl.modules.vqa import CHECKPOINT_NAME, answer_size_for, load_vqa
 from mqa_rl.modules.vqa_ensemble import VQAEnsemble
 from mqa_rl.training.vqa_data import IMAGE_KEYS, RECORD_KEYS, load_answering_records
 
@@ -94,8 +94,9 @@ def evaluate_system(cfg: DictConfig, ds: MQADataset, name: str, plan_sha: str) -
         return missing(f"no VQA at {absent[0]}", train_cmd), None, None
     model = load_vqa(vqa_paths[0]) if len(vqa_paths) == 1 else VQAEnsemble.load(vqa_paths)
     collection = OmegaConf.to_container(cfg.collection)
-    if (model.frame_size or 0) > int(collection["env"]["image_size"]):   # the VQA reads the answer camera's frames
-        collection["env"]["answer_size"] = model.frame_size
+    answer_size = answer_size_for([model], int(collection["env"]["image_size"]))
+    if answer_size is not None:                       # the VQA reads the answer camera's frames
+        collection["env"]["answer_size"] = answer_size
     t0 = time.perf_counter()
     try:
         records = load_records(store, EVAL_KEYS)

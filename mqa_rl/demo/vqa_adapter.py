@@ -92,8 +92,10 @@ class VQARegistry:
 
     def answer_size(self, image_size: int) -> int | None:
         """The answer camera the demo's env needs: the finest frames a VQA reads beyond the env's ``image_size``."""
-        finer = [m.frame_size for m in self.models.values() if (getattr(m, "frame_size", None) or 0) > image_size]
-        return max(finer) if finer else None
+        if not self.models:                  # none loaded (the VQA module may be absent): the env's frames only
+            return None
+        from mqa_rl.modules.vqa import answer_size_for
+        return answer_size_for(self.models.values(), image_size)
 
     def answer(self, name: str | None, tokens, first_rgb, last_rgb, answer_frames=None) -> dict[str, float] | str:
         """``{answer: probability}``, or the message saying why there is no answer. ``answer_frames``: (I_start,

@@ -347,6 +347,13 @@ def grounding_module(model: VQAModel) -> TensorDictModule:
     return TensorDictModule(model.grounding_logits, in_keys=[keys.QUESTION], out_keys=[keys.GROUNDING_LOGITS])
 
 
+def answer_size_for(models, image_size: int) -> int | None:
+    """The answer camera a set of VQAs needs beside an env rendering ``image_size`` px: the finest ``frame_size``
+    above it (None: every one reads the env's frames). What evaluate.py collects and the demo's env renders."""
+    finer = [m.frame_size for m in models if (getattr(m, "frame_size", None) or 0) > image_size]
+    return max(finer) if finer else None
+
+
 def vqa_module(model: VQAModel, *, from_features: bool = False) -> TensorDictModule:
     """The VQA as a TensorDict module: reads the question and both frames' rgb (or, with
     ``from_features``, the frozen encoder's cached features), writes answer logits and frame attention."""
