@@ -199,6 +199,17 @@ def random_crop(size: int, *images: torch.Tensor) -> tuple[tuple[torch.Tensor, .
     return crops, slot_area
 
 
+def subsample(rows: torch.Tensor, limit: int | None, seed: int) -> torch.Tensor:
+    """``rows`` (bool) with at most ``limit`` of its set entries kept, chosen at random with ``seed``."""
+    n = int(rows.sum())
+    if not limit or n <= limit:
+        return rows
+    keep = torch.from_numpy(np.random.default_rng(seed).choice(n, limit, replace=False)).sort().values
+    out = torch.zeros_like(rows)
+    out[rows.nonzero().squeeze(1)[keep]] = True
+    return out
+
+
 def train(cfg: DictConfig) -> dict:
     check_config(cfg)
     out = Path(cfg.out_dir)
@@ -217,7 +228,8 @@ def _train(cfg: DictConfig, out: Path) -> dict:
     if cfg.model.depth and any(m.get("schema", 1) < DEPTH_SCHEMA for m in metas):
         raise ValueError(f"model.depth=true needs frames with depth images; {list(cfg.frames.stores)} were collected "
                          f"without (an older collect_frames.py): collect them again into a new out_dir")
-    frames = load_frames(list(cfg.frames.stores), (*FRAME_KEYS, *((keys.DEPTH,) if cfg.model.depth else ())))
+    stores = list(cfg.frames.stores)
+    index = load_frames(stores, (keys.SCENE, keys.LEVEL))     # the split first, then each side's images once
     sizes = {m["plan"]["size"] for m in metas}
     want = input_size(cfg.model.image_size, cfg.model.detail, cfg.model.backbone)
     if sizes != {want}:
@@ -225,24 +237,20 @@ def _train(cfg: DictConfig, out: Path) -> dict:
                          f"(model.image_size={cfg.model.image_size}, model.detail={cfg.model.detail}, model.backbone={cfg.model.backbone}): "
                          f"collect frames at that size (collect_frames.py size={want}) or set model.image_size / "
                          f"model.detail / model.backbone")
-    classes = frames.get(keys.OBJECT_CLASSES)
-    num_classes = int(cfg.model.num_classes)
-    if int(classes.max()) >= num_classes:
-        raise ValueError(f"frames hold class {int(classes.max())} but model.num_classes={num_classes}")
-    val_mask = scene_split(frames, cfg.train.val_fraction, cfg.seed)
-    val = frames[val_mask]
-    if val.shape[0] == 0:
+    val_mask = scene_split(index, cfg.train.val_fraction, cfg.seed)
+    if not val_mask.any():
         raise ValueError(f"train.val_fraction={cfg.train.val_fraction} holds out no scene of the "
-                         f"{len(frames.get(keys.SCENE).unique())} in the frames: raise it or collect frames of more scenes")
-    if cfg.train.max_val_frames and val.shape[0] > cfg.train.max_val_frames:
-        keep = torch.from_numpy(np.random.default_rng(cfg.seed).choice(val.shape[0], cfg.train.max_val_frames, replace=False))
-        val = val[keep.sort().values]
-    train_set = frames[~val_mask]
+                         f"{len(index.get(keys.SCENE).unique())} in the frames: raise it or collect frames of more scenes")
+    val_rows = subsample(val_mask, cfg.train.max_val_frames, cfg.seed)
+    train_rows = subsample(~val_mask, cfg.train.max_frames, cfg.seed)     # the data-size ablation (6k / 20k / 50k)
+    select = (*FRAME_KEYS, *((keys.DEPTH,) if cfg.model.depth else ()))
+    val = load_frames(stores, select, rows=val_rows)
+    train_set = load_frames(stores, select, rows=train_rows)
     n_train = train_set.shape[0]
-    if cfg.train.max_frames and n_train > cfg.train.max_frames:       # the data-size ablation (6k / 20k / 50k)
-        keep = torch.from_numpy(np.random.default_rng(cfg.seed).choice(n_train, cfg.train.max_frames, replace=False))
-        train_set = train_set[keep.sort().values]
-        n_train = train_set.shape[0]
+    num_classes = int(cfg.model.num_classes)
+    top = max(int(part.get(keys.OBJECT_CLASSES).max()) for part in (val, train_set))
+    if top >= num_classes:
+        raise ValueError(f"frames hold class {top} but model.num_classes={num_classes}")
     if device.type == "cuda":           # the frames live on the GPU (~0.2 MB each at 224 px): batches never cross the bus
         train_set = train_set.to(device)
     rgb_all, omap_all, cls_all = train_set.get(keys.RGB), train_set.get(keys.OBJECT_MAP), train_set.get(keys.OBJECT_CLASSES)

@@ -18,13 +18,30 @@ SCHEMA = 2        # 2: frames hold depth
 DEPTH_SCHEMA = 2  # the first schema whose frames hold depth
 
 
-def load_frames(stores, select=None) -> TensorDict:
-    """The frames of one or more stores as one TensorDict [N] in memory; scene ids made distinct per store."""
-    parts = []
-    for i, store in enumerate([stores] if isinstance(stores, (str, Path)) else list(stores)):
-        td = load_records(store, select, require_complete=False)
-        if td.shape[0] == 0:
+def load_frames(stores, select=None, rows: torch.Tensor | None = None) -> TensorDict:
+    """The frames of one or more stores as one TensorDict [N] in memory; scene ids made distinct per store.
+
+    ``rows``: bool [N] over all the stores' frames (in the order this returns them), read only those:
+    pick the rows from a first read of a few small keys (scene, level), then read the images of each side
+    of a split. Each store is copied into one preallocated TensorDict, so memory peaks at the frames
+    returned plus one store's share, never at two copies of everything."""
+    stores = [stores] if isinstance(stores, (str, Path)) else list(stores)
+    counts = [len(load_records(store, [keys.SLOT], require_complete=False)) for store in stores]
+    if rows is not None and rows.shape[0] != sum(counts):
+        raise ValueError(f"rows has {rows.shape[0]} entries, the stores hold {sum(counts)} frames")
+    masks = [None if rows is None else m for m in (rows.split(counts) if rows is not None else counts)]
+    total = sum(counts) if rows is None else int(rows.sum())
+    out, at = None, 0
+    for i, (store, mask) in enumerate(zip(stores, masks)):
+        if counts[i] == 0:
             raise ValueError(f"{store} holds no frames yet: run recipes/collect_frames.py")
+        td = load_records(store, select, require_complete=False, rows=mask)
         td.set(keys.SCENE, td.get(keys.SCENE) + i * SCENE_OFFSET)
-        parts.append(td)
-    return torch.cat(parts)
+        if len(stores) == 1:
+            return td
+        if out is None:
+            out = td[:1].apply(lambda x: torch.empty((total, *x.shape[1:]), dtype=x.dtype), batch_size=[total])
+        out[at:at + td.shape[0]] = td
+        at += td.shape[0]
+        del td
+    return out

@@ -132,28 +132,45 @@ def read_meta(root: str | Path) -> dict:
     return json.loads(path.read_text())
 
 
-def load_records(root: str | Path, select=None, *, require_complete: bool = True) -> TensorDict:
+def load_records(root: str | Path, select=None, *, require_complete: bool = True, rows: torch.Tensor | None = None) -> TensorDict:
     """All records of a store as one in-memory TensorDict [N], sorted by slot.
 
     ``select``: the keys to read (e.g. leave the depth images on disk). ``require_complete``: raise
-    ``StoreError`` when fewer records than planned are stored (an interrupted collection)."""
+    ``StoreError`` when fewer records than planned are stored (an interrupted collection). ``rows``: bool
+    [N] over the records in slot order, read only those (a training split without a second copy).
+    Each chunk is read straight into one preallocated TensorDict: memory peaks at what is returned plus
+    one chunk, not at three copies of the store."""
     root = Path(root)
     meta = read_meta(root)
-    parts = []
-    for path in chunk_paths(root):
-        td = read_chunk(path)
-        parts.append((td.select(*select, keys.SLOT) if select is not None else td).clone())   # memmap → memory
-    if not parts:
+    chunks = [read_chunk(path) for path in chunk_paths(root)]
+    if select is not None:
+        chunks = [td.select(*select, keys.SLOT) for td in chunks]
+    if not chunks:
         if require_complete:
             raise StoreError(f"{root} holds no records yet: run (or resume) its collection")
         return TensorDict({}, batch_size=[0])
-    records = torch.cat(parts)
-    slots = records.get(keys.SLOT)
+    slots = torch.cat([td.get(keys.SLOT).clone() for td in chunks])
     order = torch.argsort(slots)
-    records = records[order]
     if (slots[order][1:] == slots[order][:-1]).any():
         raise StoreError(f"{root} holds a slot twice: a chunk was copied in by hand?")
-    if require_complete and records.shape[0] < int(meta["slots"]):
-        raise StoreError(f"{root} holds {records.shape[0]} of {meta['slots']} planned records: the collection was "
+    if require_complete and slots.shape[0] < int(meta["slots"]):
+        raise StoreError(f"{root} holds {slots.shape[0]} of {meta['slots']} planned records: the collection was "
                          f"interrupted; run the same command again to finish it")
-    return records
+    if rows is None:
+        rows = torch.ones(slots.shape[0], dtype=torch.bool)
+    elif rows.dtype != torch.bool or rows.shape != slots.shape:
+        raise ValueError(f"rows must be a bool mask over the {slots.shape[0]} records of {root}, got {rows.dtype} {tuple(rows.shape)}")
+    rank = torch.empty_like(order)
+    rank[order] = torch.arange(order.shape[0])          # each stored record's place in slot order
+    keep = rows[rank]
+    dest = (torch.cumsum(rows.long(), 0) - 1)[rank]     # its place among the rows kept
+    n = int(rows.sum())
+    out = chunks[0][:1].apply(lambda x: torch.empty((n, *x.shape[1:]), dtype=x.dtype), batch_size=[n])
+    start = 0
+    for td in chunks:
+        stop = start + td.shape[0]
+        k = keep[start:stop]
+        if k.any():
+            out[dest[start:stop][k]] = td[k]            # memmap → memory, this chunk's kept rows only
+        start = stop
+    return out

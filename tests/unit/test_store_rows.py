@@ -1,0 +1,46 @@
+"""Reading part of a store: ``rows`` picks records in slot order without a second copy of the rest."""
+
+import pytest
+import torch
+from tensordict import TensorDict
+
+from mqa_rl import keys
+from mqa_rl.collectors.frame_records import load_frames
+from mqa_rl.collectors.store import EpisodeStore, load_records
+
+
+def _store(root, slots, scene_base=0):
+    with EpisodeStore(root, {"slots": 12, "plan": {"size": 8}}) as store:
+        for chunk in slots:                                    # chunks written out of slot order
+            s = torch.tensor(chunk)
+            store.append(TensorDict({keys.SLOT: s, keys.SCENE: s // 3 + scene_base,
+                                     keys.RGB: (s[:, None, None, None] * torch.ones(1, 8, 8, 3)).to(torch.uint8),
+                                     "nested": {"x": s.float() * 0.5}}, batch_size=[len(chunk)]))
+    return root
+
+
+def test_rows_equal_indexing_the_whole_store(tmp_path):
+    root = _store(tmp_path / "a", [[5, 6, 7, 8], [0, 1, 2, 3, 4], [9, 10, 11]])
+    whole = load_records(root)
+    assert whole.get(keys.SLOT).tolist() == list(range(12))
+    rows = torch.tensor([1, 0, 0, 1, 1, 0, 1, 0, 1, 1, 0, 1], dtype=torch.bool)
+    part = load_records(root, [keys.RGB, "nested"], rows=rows)
+    assert part.get(keys.SLOT).tolist() == whole.get(keys.SLOT)[rows].tolist()
+    assert torch.equal(part.get(keys.RGB), whole.get(keys.RGB)[rows])
+    assert torch.equal(part.get(("nested", "x")), whole.get(("nested", "x"))[rows])
+    assert keys.SCENE not in part.keys()
+    with pytest.raises(ValueError, match="bool mask over the 12 records"):
+        load_records(root, rows=torch.ones(5, dtype=torch.bool))
+
+
+def test_frames_of_two_stores_by_rows(tmp_path):
+    a = _store(tmp_path / "a", [[0, 1, 2, 3, 4, 5], [6, 7, 8, 9, 10, 11]])
+    b = _store(tmp_path / "b", [[11, 10, 9, 8, 7, 6], [5, 4, 3, 2, 1, 0]], scene_base=100)
+    whole = load_frames([a, b])
+    assert whole.shape[0] == 24 and whole.get(keys.SCENE)[12:].min() >= 1_000_000   # scene ids distinct per store
+    rows = torch.arange(24) % 3 == 1
+    part = load_frames([a, b], [keys.RGB, keys.SCENE], rows=rows)
+    assert torch.equal(part.get(keys.RGB), whole.get(keys.RGB)[rows])
+    assert torch.equal(part.get(keys.SCENE), whole.get(keys.SCENE)[rows])
+    with pytest.raises(ValueError, match="rows has 23 entries, the stores hold 24"):
+        load_frames([a, b], rows=rows[:23])
