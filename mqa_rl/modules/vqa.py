@@ -50,6 +50,7 @@ raise ``ValueError`` for a word or token outside the model's vocabulary.
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import io
 from pathlib import Path
 
@@ -305,8 +306,22 @@ class VQAModel(nn.Module):
                 raise ValueError(f"{name} must be a uint8 tensor [B={batch}, H, W, 3]; got "
                                  f"{getattr(img, 'dtype', type(img))} {tuple(getattr(img, 'shape', ()))}")
         device = next(self.parameters()).device
+        if first_rgb.shape != last_rgb.shape:           # frames of two sizes: each is resized on its own
+            with self._evaluating(), torch.no_grad():
+                return tuple(self.encode_frames(img.permute(0, 3, 1, 2).to(device)) for img in (first_rgb, last_rgb))
+        images = torch.cat([first_rgb, last_rgb])
+        where: dict[bytes, int] = {}        # each distinct image encoded once: I_stop = I_start where nothing was
+        firsts, inverse = [], []            # pushed, and a scene's I_start recurs in each of its episodes
+        for i, img in enumerate(images):
+            digest = image_digest(img)
+            if digest not in where:
+                where[digest] = len(firsts)
+                firsts.append(i)
+            inverse.append(where[digest])
+        firsts, inverse = torch.tensor(firsts), torch.tensor(inverse)
         with self._evaluating(), torch.no_grad():
-            return tuple(self.encode_frames(img.permute(0, 3, 1, 2).to(device)) for img in (first_rgb, last_rgb))
+            features = self.encode_frames(images[firsts].permute(0, 3, 1, 2).to(device))[inverse.to(device)]
+        return features[:batch], features[batch:]
 
     def answer_probs_from_features(self, question_tokens: torch.Tensor, first: torch.Tensor, last: torch.Tensor) -> torch.Tensor:
         """``answer_probs`` from ``frame_features`` (tokens checked by the caller)."""
@@ -330,6 +345,11 @@ class VQAModel(nn.Module):
             raise ValueError(f"this VQA was trained with another question or answer vocabulary than {dataset.root}'s "
                              f"({len(self.vocab)} vs {len(dataset.vocab)} words, answers {self.answers} vs "
                              f"{list(dataset.answers)}): retrain it on this dataset's rollouts")
+
+
+def image_digest(image: torch.Tensor) -> bytes:
+    """A digest of one image's bytes: equal images (a scene's I_start in each of its episodes) are encoded once."""
+    return hashlib.sha1(image.detach().cpu().contiguous().numpy().tobytes()).digest()
 
 
 class _FromFeatures(nn.Module):

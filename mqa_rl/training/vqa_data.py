@@ -30,6 +30,7 @@ from mqa_rl.collectors.store import SCENE_OFFSET, chunk_paths, load_records, rea
 from mqa_rl.data import MQADataset
 from mqa_rl.data.dataset import dataset_fingerprint
 from mqa_rl.files import write_atomic
+from mqa_rl.modules.vqa import image_digest
 from mqa_rl.transforms.dihedral import DIHEDRAL, dihedral
 
 RECORD_KEYS = (keys.QUESTION, keys.ANSWER_LABEL, keys.TYPE_LABEL, keys.LEVEL, keys.SCENE, keys.QUESTION_ID,
@@ -90,7 +91,8 @@ def encode_store(store: str | Path, encode, *, transforms: int = 1, batch_size: 
 
     ``cache_key`` (e.g. ``encoder_fingerprint`` of a frozen encoder): the features are kept in
     ``<store>/features/`` and read back by the next call with the same key, frames and records (a head's
-    seeds share one pass of a perception that reads 448-px frames at ~6 frames/s on 2 cores)."""
+    seeds share one pass of a perception that reads 448-px frames at ~6 frames/s on 2 cores). Identical
+    images (by digest) are encoded once: a scene's I_start recurs in each of its episodes."""
     records = load_answering_records(store, images=False, require_complete=require_complete)
     chosen = frame_keys(store, size)
     cache = Path(store) / FEATURE_CACHE / f"{cache_key[:16]}-{'-'.join(chosen[0])}-t{transforms}.pt" if cache_key else None
@@ -107,20 +109,33 @@ def encode_store(store: str | Path, encode, *, transforms: int = 1, batch_size: 
             return records
     order = {int(s): i for i, s in enumerate(records.get(keys.SLOT))}
     feats = {key: None for key in IMAGE_KEYS}
+    seen: dict[bytes, tuple[str, int]] = {}    # an image's digest → where its features are
     for path in chunk_paths(store):
         chunk = read_chunk(path)
         rows = torch.tensor([order[int(s)] for s in chunk.get(keys.SLOT)])
         for key, stored in zip(IMAGE_KEYS, chosen):
             images = chunk.get(stored)
-            for start in range(0, images.shape[0], batch_size):
-                block = images[start:start + batch_size].clone()
+            fresh, copies = [], []          # I_stop = I_start where nothing was pushed
+            for i in range(images.shape[0]):
+                digest = image_digest(images[i])
+                if digest in seen:
+                    copies.append((int(rows[i]), *seen[digest]))
+                else:
+                    seen[digest] = (key, int(rows[i]))
+                    fresh.append(i)
+            fresh = torch.tensor(fresh, dtype=torch.long)
+            for start in range(0, len(fresh), batch_size):
+                take = fresh[start:start + batch_size]
+                block = images[take].clone()
                 per_t = [encode(dihedral(block, k)).to(torch.float16) for k in range(transforms)]
                 out = torch.stack(per_t, 1)                                 # [b, T, C, h, w]
                 if feats[key] is None:
-                    feats[key] = torch.zeros(len(records), *out.shape[1:], dtype=torch.float16)
-                feats[key][rows[start:start + batch_size]] = out
-                if progress is not None:
-                    progress.update(out.shape[0])
+                    feats = {k: torch.zeros(len(records), *out.shape[1:], dtype=torch.float16) for k in IMAGE_KEYS}
+                feats[key][rows[take]] = out
+            for row, src_key, src_row in copies:
+                feats[key][row] = feats[src_key][src_row]
+            if progress is not None:
+                progress.update(images.shape[0])
     if feats[IMAGE_KEYS[0]] is None:
         raise ValueError(f"{store} holds no images")
     records.set(keys.FIRST_FEATURES, feats[keys.FIRST_RGB])

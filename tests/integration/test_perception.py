@@ -150,6 +150,12 @@ def test_counting_vqa_answers_through_the_public_contract_and_reloads(tmp_path):
     img = torch.randint(0, 255, (1, 224, 224, 3), dtype=torch.uint8)
     probs = model.answer_probs(tokens, img, img)
     assert probs.shape == (1, 4) and torch.allclose(probs.sum(-1), torch.ones(1))
+    # repeated images (I_stop = I_start, a scene's I_start in several episodes) are encoded once, answered as alone
+    other = torch.randint(0, 255, (1, 224, 224, 3), dtype=torch.uint8)
+    first, last = torch.cat([img, img, other]), torch.cat([other, img, img])
+    together = model.answer_probs(tokens.expand(3, -1), first, last)
+    alone = torch.cat([model.answer_probs(tokens, first[i:i + 1], last[i:i + 1]) for i in range(3)])
+    assert torch.allclose(together, alone, atol=1e-5) and torch.allclose(together[1], probs[0], atol=1e-5)
     assert model.grounding_logits(tokens).shape == (1, 2, K)
     again = load_vqa(save_vqa(model, tmp_path / "vqa.pt"))
     assert torch.allclose(again.answer_probs(tokens, img, img), probs)

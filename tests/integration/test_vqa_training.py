@@ -14,10 +14,10 @@ from mqa_rl import keys
 from mqa_rl.data.vocab import Vocabulary
 from mqa_rl.losses.encoder_pretraining import EncoderPretrainLoss
 from mqa_rl.losses.vqa import VQALoss
-from mqa_rl.modules.vqa import VQAModel, load_vqa, vqa_module
+from mqa_rl.modules.vqa import VQAModel, image_digest, load_vqa, vqa_module
 from mqa_rl.modules.vqa_encoder import FrameEncoder, PretrainHeads, load_encoder, save_encoder
 from mqa_rl.training.frame_pack import load_frame_pack
-from mqa_rl.training.vqa_data import Batches, encode_store, encoder_fingerprint, pretraining_frames
+from mqa_rl.training.vqa_data import Batches, encode_store, encoder_fingerprint, load_answering_records, pretraining_frames
 from mqa_rl.transforms.dihedral import dihedral
 from mqa_rl.verified_checkpoint import CheckpointCorrupt
 
@@ -109,8 +109,19 @@ def test_encoder_pretrains_on_a_few_frames(small_dataset, answering_root, tmp_pa
         load_encoder(tmp_path / "vqa.pt")
     # frozen features of a store: one row per record, per dihedral transform
     model = VQAModel(small_dataset.vocab.itos, small_dataset.answers).eval()
-    records = encode_store(store, model.encode_frames, transforms=2)
+    seen = []
+
+    def counting(x):
+        seen.append(x.shape[0])
+        return model.encode_frames(x)
+    records = encode_store(store, counting, transforms=2)
     assert records[keys.FIRST_FEATURES].shape == (records.shape[0], 2, 32, 10, 10)
+    # each distinct image once (a scene's I_start recurs in each of its episodes), yet every record its own features
+    images = load_answering_records(store)
+    distinct = {image_digest(x) for x in torch.cat([images[keys.FIRST_RGB], images[keys.LAST_RGB]])}
+    assert sum(seen) == 2 * len(distinct) < 2 * 2 * records.shape[0]
+    one = model.encode_frames(images[keys.LAST_RGB][-1:])
+    assert torch.allclose(records[keys.LAST_FEATURES][-1, 0].float(), one[0], atol=2e-2)
     batch = Batches(records, 4, augment=True).sample()
     assert batch[keys.FIRST_FEATURES].shape == (4, 32, 10, 10) and batch[keys.FIRST_FEATURES].dtype == torch.float32
     # with a cache key the features are kept beside the store and read back, not recomputed; another key recomputes
