@@ -167,10 +167,10 @@ def load_records(root: str | Path, select=None, *, require_complete: bool = True
     n = int(rows.sum())
     out = chunks[0][:1].apply(lambda x: torch.empty((n, *x.shape[1:]), dtype=x.dtype), batch_size=[n])
     start = 0
-    for td in chunks:
+    for j, td in enumerate(chunks):
         stop = start + td.shape[0]
         k = keep[start:stop]
         if k.any():
             out[dest[start:stop][k]] = td[k]            # memmap → memory, this chunk's kept rows only
-        start = stop
+        start, chunks[j] = stop, None                   # and its mapping let go
     return out
