@@ -7,10 +7,9 @@ target's visible area.
     python benchmarks/perception_counts.py --perception checkpoints/vqa_counting/perception.pt
     python benchmarks/perception_counts.py --perception ... --dataset data/mqa_heldout     # fresh piles
     python benchmarks/perception_counts.py --perception A.pt --baseline B.pt               # A − B, paired by question
-    python benchmarks/perception_counts.py --perception A448.pt --render 448 --baseline B.pt   # A reads a 448-px render
 
-The truth is always the 224-px render's (the answering episodes' and the perfect counter's); ``--render`` renders
-the same rest piles finer for the perception A alone (the baseline reads the 224-px render).
+Each perception reads the same rest piles rendered at its own input size (the shipped file: 448 px; ``--render``
+sets perception A's); the truth is always the 224-px render's (the answering episodes' and the perfect counter's).
 """
 
 from __future__ import annotations
@@ -74,24 +73,34 @@ def main() -> None:
     p.add_argument("--split", default="test")
     p.add_argument("--baseline", default=None, help="another perception file: also A − baseline on the same images, "
                                                     "paired by question, 95 %% by scene")
-    p.add_argument("--render", type=int, default=RENDER_SIZE, help="the side of the render the perception A reads (a finer "
-                                                            "one than 224: the same piles; the truth stays the 224-px one)")
+    p.add_argument("--render", type=int, default=None, help="the side of the render perception A reads (default: its "
+                                                      "input size; the same piles; the truth stays the 224-px one)")
     p.add_argument("--json", default=None, help="also write the figures to this file")
     a = p.parse_args()
-    if a.render < RENDER_SIZE or a.render % RENDER_SIZE:
-        p.error(f"--render must be a multiple of {RENDER_SIZE}, got {a.render}")
     torch.set_num_threads(2)
     ds = MQADataset(a.dataset)
     model, meta = load_perception(a.perception)
+    base = load_perception(a.baseline)[0] if a.baseline else None
+    a.render = a.render or model.input_size
+    for size in {a.render, base.input_size if base else RENDER_SIZE}:
+        if size < RENDER_SIZE or size % RENDER_SIZE:
+            p.error(f"a render must be a multiple of {RENDER_SIZE} px, got {size}")
     t0 = time.perf_counter()
-    scenes = first_images(ds, a.split)
-    fine = first_images(ds, a.split, a.render) if a.render != RENDER_SIZE else scenes
+    renders = {RENDER_SIZE: first_images(ds, a.split)}
+
+    def rendered(size: int) -> dict:
+        if size not in renders:
+            renders[size] = first_images(ds, a.split, size)
+        return renders[size]
+    scenes, fine = renders[RENDER_SIZE], rendered(a.render)
+    if base is not None:
+        rendered(base.input_size)
     render_s = time.perf_counter() - t0
     order = sorted(scenes)
     t0 = time.perf_counter()
     counted = count_scenes(model, fine, order)
     perceive_s = time.perf_counter() - t0
-    baseline = count_scenes(load_perception(a.baseline)[0], scenes, order) if a.baseline else None
+    baseline = count_scenes(base, rendered(base.input_size), order) if base is not None else None
     index = {s.id: i for i, s in enumerate(ds.scenes)}
     rows = []                  # (level, scene, predicted, visible, answer, smallest countable target's area, baseline's)
     for q in ds.select(split=a.split, types=["counting"]):

@@ -343,20 +343,21 @@ def test_the_shipped_counting_vqas_load_with_their_provenance_and_answer(system,
     assert model.pool == "counts" and model.meta["system"] == system and model.answers == list(small_dataset.answers)
     for name, weight in perception.state_dict().items():       # the head's frozen copy is the shipped perception
         assert torch.equal(model.encoder.state_dict()[name], weight)
-    frame = torch.full((1, 224, 224, 3), 128, dtype=torch.uint8)
+    assert model.frame_size == 448                              # it reads the answer camera's frames
+    frame = torch.full((1, 448, 448, 3), 128, dtype=torch.uint8)
     probs = model.answer_probs(model.tokenize(["How many cans are there in the bin?"]), frame, frame)
     assert probs.shape == (1, len(model.answers)) and torch.allclose(probs.sum(-1), torch.ones(1))
 
 
-def test_the_448_px_perception_loads_with_its_provenance_and_counts_a_448_render_at_224_cells():
-    """checkpoints/perception_448 (the resolution lever's warm start): its hash is its provenance's, it reads a
-    448-px render at one output cell per pixel of the 224-px render, one non-negative count per class."""
+def test_the_shipped_perception_loads_with_its_provenance_and_counts_a_448_render_at_224_cells():
+    """checkpoints/vqa_counting/perception.pt: its hash is its provenance's, it reads a 448-px render at one
+    output cell per pixel of the 224-px render, one non-negative count per class."""
     import hashlib
     import json
 
     from conftest import REPO
 
-    folder = REPO / "checkpoints" / "perception_448"
+    folder = REPO / "checkpoints" / "vqa_counting"
     provenance = json.loads((folder / "provenance.json").read_text())
     assert hashlib.sha256((folder / "perception.pt").read_bytes()).hexdigest() == provenance["perception_sha256"]
     model, meta = load_perception(folder / "perception.pt")
