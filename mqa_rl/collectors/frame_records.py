@@ -12,7 +12,7 @@ import torch
 from tensordict import TensorDict
 
 from mqa_rl import keys
-from mqa_rl.collectors.store import SCENE_OFFSET, load_records
+from mqa_rl.collectors.store import SCENE_OFFSET, empty_records, load_records
 
 SCHEMA = 2        # 2: frames hold depth
 DEPTH_SCHEMA = 2  # the first schema whose frames hold depth
@@ -29,7 +29,7 @@ def load_frames(stores, select=None, rows: torch.Tensor | None = None) -> Tensor
     counts = [len(load_records(store, [keys.SLOT], require_complete=False)) for store in stores]
     if rows is not None and rows.shape[0] != sum(counts):
         raise ValueError(f"rows has {rows.shape[0]} entries, the stores hold {sum(counts)} frames")
-    masks = [None if rows is None else m for m in (rows.split(counts) if rows is not None else counts)]
+    masks = rows.split(counts) if rows is not None else [None] * len(stores)
     total = sum(counts) if rows is None else int(rows.sum())
     out, at = None, 0
     for i, (store, mask) in enumerate(zip(stores, masks)):
@@ -40,7 +40,7 @@ def load_frames(stores, select=None, rows: torch.Tensor | None = None) -> Tensor
         if len(stores) == 1:
             return td
         if out is None:
-            out = td[:1].apply(lambda x: torch.empty((total, *x.shape[1:]), dtype=x.dtype), batch_size=[total])
+            out = empty_records(td, total)
         out[at:at + td.shape[0]] = td
         at += td.shape[0]
         del td

@@ -165,7 +165,7 @@ def load_records(root: str | Path, select=None, *, require_complete: bool = True
     keep = rows[rank]
     dest = (torch.cumsum(rows.long(), 0) - 1)[rank]     # its place among the rows kept
     n = int(rows.sum())
-    out = chunks[0][:1].apply(lambda x: torch.empty((n, *x.shape[1:]), dtype=x.dtype), batch_size=[n])
+    out = empty_records(chunks[0], n)
     start = 0
     for j, td in enumerate(chunks):
         stop = start + td.shape[0]
@@ -174,3 +174,9 @@ def load_records(root: str | Path, select=None, *, require_complete: bool = True
             out[dest[start:stop][k]] = td[k]            # memmap → memory, this chunk's kept rows only
         start, chunks[j] = stop, None                   # and its mapping let go
     return out
+
+
+def empty_records(like: TensorDict, n: int) -> TensorDict:
+    """An uninitialised in-memory TensorDict [n] with ``like``'s keys, dtypes and per-record shapes: filled in place,
+    so a store is read without a second copy of it."""
+    return like[:1].apply(lambda x: torch.empty((n, *x.shape[1:]), dtype=x.dtype), batch_size=[n])

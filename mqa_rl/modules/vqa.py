@@ -310,17 +310,13 @@ class VQAModel(nn.Module):
             with self._evaluating(), torch.no_grad():
                 return tuple(self.encode_frames(img.permute(0, 3, 1, 2).to(device)) for img in (first_rgb, last_rgb))
         images = torch.cat([first_rgb, last_rgb])
-        where: dict[bytes, int] = {}        # each distinct image encoded once: I_stop = I_start where nothing was
-        firsts, inverse = [], []            # pushed, and a scene's I_start recurs in each of its episodes
-        for i, img in enumerate(images):
-            digest = image_digest(img)
-            if digest not in where:
-                where[digest] = len(firsts)
-                firsts.append(i)
-            inverse.append(where[digest])
-        firsts, inverse = torch.tensor(firsts), torch.tensor(inverse)
+        fresh, copies = split_repeats(images, {}, lambda i: i)
         with self._evaluating(), torch.no_grad():
-            features = self.encode_frames(images[firsts].permute(0, 3, 1, 2).to(device))[inverse.to(device)]
+            encoded = self.encode_frames(images[fresh].permute(0, 3, 1, 2).to(device))
+        features = encoded.new_empty((len(images), *encoded.shape[1:]))
+        features[fresh] = encoded
+        for i, j in copies:
+            features[i] = features[j]
         return features[:batch], features[batch:]
 
     def answer_probs_from_features(self, question_tokens: torch.Tensor, first: torch.Tensor, last: torch.Tensor) -> torch.Tensor:
@@ -350,6 +346,22 @@ class VQAModel(nn.Module):
 def image_digest(image: torch.Tensor) -> bytes:
     """A digest of one image's bytes: equal images (a scene's I_start in each of its episodes) are encoded once."""
     return hashlib.sha1(image.detach().cpu().contiguous().numpy().tobytes()).digest()
+
+
+def split_repeats(images: torch.Tensor, seen: dict, place) -> tuple[list[int], list[tuple[int, object]]]:
+    """Each distinct image encoded once: the indices of ``images`` whose bytes ``seen`` does not hold yet (it records
+    ``place(i)`` for each), and for the others (index, the place of the equal image seen first). ``seen`` may
+    carry over between calls (a store read chunk by chunk). I_stop = I_start where nothing was pushed, and a
+    scene's I_start is the same render in every episode of it."""
+    fresh, copies = [], []
+    for i in range(images.shape[0]):
+        digest = image_digest(images[i])
+        if digest in seen:
+            copies.append((i, seen[digest]))
+        else:
+            seen[digest] = place(i)
+            fresh.append(i)
+    return fresh, copies
 
 
 class _FromFeatures(nn.Module):

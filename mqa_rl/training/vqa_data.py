@@ -30,7 +30,7 @@ from mqa_rl.collectors.store import SCENE_OFFSET, chunk_paths, load_records, rea
 from mqa_rl.data import MQADataset
 from mqa_rl.data.dataset import dataset_fingerprint
 from mqa_rl.files import write_atomic
-from mqa_rl.modules.vqa import image_digest
+from mqa_rl.modules.vqa import split_repeats
 from mqa_rl.transforms.dihedral import DIHEDRAL, dihedral
 
 RECORD_KEYS = (keys.QUESTION, keys.ANSWER_LABEL, keys.TYPE_LABEL, keys.LEVEL, keys.SCENE, keys.QUESTION_ID,
@@ -115,14 +115,7 @@ def encode_store(store: str | Path, encode, *, transforms: int = 1, batch_size: 
         rows = torch.tensor([order[int(s)] for s in chunk.get(keys.SLOT)])
         for key, stored in zip(IMAGE_KEYS, chosen):
             images = chunk.get(stored)
-            fresh, copies = [], []          # I_stop = I_start where nothing was pushed
-            for i in range(images.shape[0]):
-                digest = image_digest(images[i])
-                if digest in seen:
-                    copies.append((int(rows[i]), *seen[digest]))
-                else:
-                    seen[digest] = (key, int(rows[i]))
-                    fresh.append(i)
+            fresh, copies = split_repeats(images, seen, lambda i: (key, int(rows[i])))
             fresh = torch.tensor(fresh, dtype=torch.long)
             for start in range(0, len(fresh), batch_size):
                 take = fresh[start:start + batch_size]
@@ -132,8 +125,8 @@ def encode_store(store: str | Path, encode, *, transforms: int = 1, batch_size: 
                 if feats[key] is None:
                     feats = {k: torch.zeros(len(records), *out.shape[1:], dtype=torch.float16) for k in IMAGE_KEYS}
                 feats[key][rows[take]] = out
-            for row, src_key, src_row in copies:
-                feats[key][row] = feats[src_key][src_row]
+            for i, (src_key, src_row) in copies:
+                feats[key][rows[i]] = feats[src_key][src_row]
             if progress is not None:
                 progress.update(images.shape[0])
     if feats[IMAGE_KEYS[0]] is None:
