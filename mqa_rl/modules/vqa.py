@@ -315,8 +315,9 @@ class VQAModel(nn.Module):
             encoded = self.encode_frames(images[fresh].permute(0, 3, 1, 2).to(device))
         features = encoded.new_empty((len(images), *encoded.shape[1:]))
         features[fresh] = encoded
-        for i, j in copies:
-            features[i] = features[j]
+        if copies:                          # each copy's source is a fresh image, filled just above
+            to, src = zip(*copies)
+            features[list(to)] = features[list(src)]
         return features[:batch], features[batch:]
 
     def answer_probs_from_features(self, question_tokens: torch.Tensor, first: torch.Tensor, last: torch.Tensor) -> torch.Tensor:
