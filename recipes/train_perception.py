@@ -12,7 +12,8 @@ in the scene) pairs whose count (vote clusters or density, whichever is better) 
 objects with ≥ 20 visible pixels; at the end it chooses the readout and its counting settings (vote
 radius, suppression window, probability floor, mass threshold; the density's rounding point) on
 those scenes too and writes them into the file (``calibrate_only=true``: only
-that, for a run stopped early).
+that, for a run stopped early). ``baseline=<perception.pt>`` counts another file (the shipped one, or the
+``init_from``) on the same held-out frames, calibrated the same way: the figure to beat, in ``summary.json``.
 Writes ``out_dir/perception.pt`` (the best; ``mqa_rl.modules.perception.load_perception``),
 ``checkpoints/`` (atomic, for resume=true), ``csv/`` + ``wandb/`` logs, ``config.yaml``, ``summary.json``.
 """
@@ -210,6 +211,20 @@ def subsample(rows: torch.Tensor, limit: int | None, seed: int) -> torch.Tensor:
     return out
 
 
+def baseline_accuracy(path: str, val, device, size: int, depth: bool) -> dict:
+    """The count accuracy of another perception file (``baseline=``) on this run's held-out frames, its counting
+    settings chosen there as this run's are at its end: the two figures compare on the same frames (a file's own
+    ``val`` was drawn from the stores it was trained on)."""
+    model, _ = load_perception(path)
+    if model.input_size != size or model.depth != depth:
+        raise ValueError(f"baseline={path} reads {model.input_size}-px frames{' with depth' if model.depth else ''}, this "
+                         f"run's are {size} px{' with depth' if depth else ''}: name a perception of the same input")
+    best, tried = calibrate_counting(model.to(device), val, device)
+    after = next(r for r in tried if all(r[k] == best[k] for k in best))
+    print(f"baseline {path} on these {val.shape[0]} held-out frames, calibrated: {after['val/count_accuracy']:.3f}", flush=True)
+    return after
+
+
 def train(cfg: DictConfig) -> dict:
     check_config(cfg)
     out = Path(cfg.out_dir)
@@ -259,8 +274,9 @@ def _train(cfg: DictConfig, out: Path) -> dict:
     print(f"{n_train} training frames, {val.shape[0]} validation frames ({int(val_mask.sum())} held out) "
           f"from {len(cfg.frames.stores)} store(s)", flush=True)
 
+    baseline = baseline_accuracy(cfg.baseline, val, device, want, bool(cfg.model.depth)) if cfg.baseline else None
     if cfg.calibrate_only:                    # a run stopped early: choose its counting settings now
-        return calibrate_file(out / PERCEPTION_FILE, val, device)
+        return {**calibrate_file(out / PERCEPTION_FILE, val, device), **with_baseline(baseline)}
 
     model = CountingPerception(num_classes, tuple(cfg.model.widths), int(cfg.model.image_size),
                                detail=int(cfg.model.detail), backbone=cfg.model.backbone, depth=bool(cfg.model.depth))
@@ -280,7 +296,7 @@ def _train(cfg: DictConfig, out: Path) -> dict:
     refuse_unresumable(out, ckpt.latest() is not None, bool(cfg.resume))
     if ckpt.latest() is not None:
         refuse_changed_config(out / "config.yaml", config, allow=bool(cfg.resume_allow_changes),
-                              free=(*RESUMABLE, "train.steps", "calibrate_only"))   # a longer run stretches the cosine from here
+                              free=(*RESUMABLE, "train.steps", "calibrate_only", "baseline"))   # a longer run stretches the cosine from here
         ckpt.load()
         schedule.last_epoch = state["step"]            # the warm-up and cosine continue from the restored step
         for group, base in zip(optim.param_groups, schedule.base_lrs):
@@ -347,10 +363,18 @@ def _train(cfg: DictConfig, out: Path) -> dict:
     summary = {"steps": steps, "best_step": state["best_step"], "best_val_count_accuracy": state["best"],
                "calibrated_val_count_accuracy": calibrated["val/count_accuracy"],
                "train_seconds": round(state["train_seconds"], 1), "train_frames": n_train, "val_frames": int(val.shape[0]),
-               "perception": str(out / PERCEPTION_FILE)}
+               "perception": str(out / PERCEPTION_FILE), **with_baseline(baseline)}
     write_atomic(out / "summary.json", json.dumps(summary, indent=1))
     print("done:", summary)
     return summary
+
+
+def with_baseline(baseline: dict | None) -> dict:
+    """The summary's baseline entries (none without ``baseline=``)."""
+    if baseline is None:
+        return {}
+    return {"baseline_calibrated_val_count_accuracy": baseline["val/count_accuracy"],
+            "baseline_by_level": {k.rsplit("_", 1)[1]: v for k, v in baseline.items() if k.startswith("val/count_accuracy_")}}
 
 
 @hydra.main(config_path="conf", config_name="train_perception", version_base="1.3")

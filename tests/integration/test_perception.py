@@ -296,8 +296,12 @@ def test_frames_perception_and_counting_vqa_recipes_end_to_end(small_dataset, sp
     with pytest.raises(ValueError, match="train.crop=40"):            # a window the U-Net's strides cannot tile
         train.train(compose_recipe_config("train_perception", [*targs, "train.steps=2", "train.crop=40"]))
     cropped = train.train(compose_recipe_config("train_perception", [                 # trained on 64-px windows
-        *(a for a in targs if not a.startswith("out_dir=")), "train.steps=2", "train.crop=64", f"out_dir={tmp_path / 'crop'}"]))
+        *(a for a in targs if not a.startswith("out_dir=")), "train.steps=2", "train.crop=64", f"out_dir={tmp_path / 'crop'}",
+        f"baseline={out / 'perception.pt'}"]))                                     # beside the first run's file
     assert load_perception(cropped["perception"])[0].out_size == 56                  # it reads whole frames
+    assert 0.0 <= cropped["baseline_calibrated_val_count_accuracy"] <= 1.0 and set(cropped["baseline_by_level"]) <= {"easy", "medium", "hard"}
+    with pytest.raises(ValueError, match="baseline=.*with depth"):     # a file of another input cannot be compared
+        train.train(compose_recipe_config("train_perception", [*targs, "calibrate_only=true", f"baseline={with_depth['perception']}"]))
     chosen = load_perception(out / "perception.pt")[1]["counting_calibration"]["chosen"]
     assert load_perception(out / "perception.pt")[0].counting == chosen       # the file counts with what was chosen
 
