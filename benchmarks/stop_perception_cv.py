@@ -1,5 +1,5 @@
 """Does a learned stop that reads the counting perception stop better? (issue 40, twentieth attempt; again on the
-448-px perception in the twenty-fifth)
+448-px perception in the twenty-sixth)
 
 The learned stop reads the push policy's geometry maps; the nineteenth attempt found that remembering their start
 does not help ("what the stop lacks is a better view of the targets"). The counting perception
@@ -18,6 +18,7 @@ of the asked class rises after a push against how often the share a counter miss
 that reads a finer render (the shipped 448-px file) reads each state through the env's answer camera, as the VQA does.
 
     python benchmarks/stop_perception_cv.py run=checkpoints/dqn_countable out=runs/stop/perception400 episodes=400
+    python benchmarks/stop_perception_cv.py run=checkpoints/dqn_countable out=runs/stop/perception448 episodes=200   # 29 min
 """
 from __future__ import annotations
 
