@@ -32,6 +32,8 @@ import torch
 from omegaconf import OmegaConf
 
 from mqa_rl import keys
+from mqa_rl.data.dataset import LEVELS
+from mqa_rl.evaluation.episode_metrics import scene_bootstrap_ci95
 from mqa_rl.files import load_tensors, write_atomic
 from mqa_rl.modules.learned_stop import policy_net, stop_features
 from mqa_rl.modules.perception import load_perception
@@ -42,9 +44,6 @@ from mqa_rl.training.optimal_stopping import fit_stop_critic, fixed_rules, stopp
 from mqa_rl.transforms.episode_stats import uncountable_share
 from mqa_rl.transforms.mqa_env import make_mqa_env
 from mqa_rl.transforms.push_memory import memory_radius
-
-LEVELS = ("easy", "medium", "hard")
-
 
 def padded(x: torch.Tensor, length: int) -> torch.Tensor:
     pad = length - x.shape[0]
@@ -81,12 +80,15 @@ def collect(run: Path, perception, level: str, episodes: int, seed: int) -> dict
     try:
         actor, _, _ = load_greedy(run, None, env)
         net = policy_net(actor)
-        policy = AnswerFrames(StopMargin(actor, float("inf")), env)
+        policy = StopMargin(actor, float("inf"))
+        if finer:                                                 # the frames the finer perception reads
+            policy = AnswerFrames(policy, env)
         env.base_env.set_seed(seed)
         base, reading, missed, valid, scenes = [], [], [], [], []
         with torch.no_grad():
             for _ in range(episodes):
-                policy.frames = []
+                if finer:
+                    policy.frames = []
                 rollout = env.rollout(max_pushes + 1, policy, break_when_any_done=True)
                 if not bool(rollout[0].get(keys.TARGET_MASK).any()):
                     continue
@@ -126,17 +128,6 @@ def flicker(reading: torch.Tensor, uncountable: torch.Tensor, valid: torch.Tenso
     share = lambda m, w: float(w[m].float().mean()) if m.any() else float("nan")  # noqa: E731
     return (f"count rose after {int(rise.sum())} of {int(pair.sum())} pushes: missed share fell after {share(rise, fell):.2f}, "
             f"rose after {share(rise, worse):.2f}; count stayed: fell {share(stay, fell):.2f}, rose {share(stay, worse):.2f}")
-
-
-def scene_bootstrap(diff, scene_ids, draws=2000, seed=0):
-    generator = torch.Generator().manual_seed(seed)
-    ids = scene_ids.unique()
-    means = []
-    for _ in range(draws):
-        pick = ids[torch.randint(len(ids), (len(ids),), generator=generator)]
-        weight = torch.bincount(pick, minlength=int(scene_ids.max()) + 1)[scene_ids].float()
-        means.append(float((weight * diff).sum() / weight.sum()))
-    return torch.tensor(means).quantile(torch.tensor([0.025, 0.975])).tolist()
 
 
 def main(run: str, out: str, episodes: str = "400", perception: str = "checkpoints/vqa_counting/perception.pt",
@@ -186,8 +177,8 @@ def main(run: str, out: str, episodes: str = "400", perception: str = "checkpoin
             cells = []
             for i in range(3):
                 m = level_of == i
-                low, high = scene_bootstrap(diff[m], scene_ids[m])
-                cells.append(f"{float(diff[m].mean()):+.3f} [{low:+.3f}, {high:+.3f}]")
+                mean, low, high, _ = scene_bootstrap_ci95(diff[m], scene_ids[m])
+                cells.append(f"{mean:+.3f} [{low:+.3f}, {high:+.3f}]")
             print(f"{name} − base, {what}: " + " / ".join(cells))
 
 

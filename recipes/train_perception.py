@@ -117,9 +117,9 @@ def count_accuracy(model: CountingPerception, frames, device) -> dict[str, float
     return {**out, **{k.replace("val/", "val/density_"): v for k, v in dens.items()}}
 
 
-def calibrate_counting(model: CountingPerception, frames, device) -> tuple[dict, list[dict]]:
+def calibrate_counting(model: CountingPerception, frames, device) -> tuple[dict, dict, list[dict]]:
     """The counting settings (``CALIBRATION_GRID``) under which the model counts the most (frame, class present)
-    pairs of ``frames`` (held-out pretraining scenes) right, and every setting's accuracy."""
+    pairs of ``frames`` (held-out pretraining scenes) right, their accuracy row, and every setting's."""
     probs, votes, density = predictions(model, frames, device)
     tried = []
     grid = CALIBRATION_GRID
@@ -133,16 +133,15 @@ def calibrate_counting(model: CountingPerception, frames, device) -> tuple[dict,
         setting = {**model.counting, "readout": "density", "round_at": round_at}
         tried.append({**setting, **accuracy_table(vote_counting.density_counts(expected, round_at), frames)})
     best = max(tried, key=lambda r: r["val/count_accuracy"])
-    return {k: best[k] for k in vote_counting.DEFAULT_COUNTING}, tried
+    return {k: best[k] for k in vote_counting.DEFAULT_COUNTING}, best, tried
 
 
 def calibrate_file(path: Path, val, device) -> dict:
     """Calibrate the counting settings of the perception file at ``path`` on ``val`` and write them into it."""
     model, meta = load_perception(path)
     model.to(device)
-    best, tried = calibrate_counting(model, val, device)
+    best, after, tried = calibrate_counting(model, val, device)
     model.counting = dict(best)
-    after = next(r for r in tried if all(r[k] == best[k] for k in best))
     save_perception(model, path, {**meta, "counting_calibration": {"chosen": best, "val": after, "tried": tried}})
     print(f"counting settings chosen on {val.shape[0]} held-out frames: {best} -> val count accuracy "
           f"{after['val/count_accuracy']:.3f} (before: {meta.get('val', {}).get('val/count_accuracy', float('nan')):.3f})")
@@ -219,8 +218,7 @@ def baseline_accuracy(path: str, val, device, size: int, depth: bool) -> dict:
     if model.input_size != size or model.depth != depth:
         raise ValueError(f"baseline={path} reads {model.input_size}-px frames{' with depth' if model.depth else ''}, this "
                          f"run's are {size} px{' with depth' if depth else ''}: name a perception of the same input")
-    best, tried = calibrate_counting(model.to(device), val, device)
-    after = next(r for r in tried if all(r[k] == best[k] for k in best))
+    _, after, _ = calibrate_counting(model.to(device), val, device)
     print(f"baseline {path} on these {val.shape[0]} held-out frames, calibrated: {after['val/count_accuracy']:.3f}", flush=True)
     return after
 
