@@ -76,7 +76,7 @@ FIRST = "first"
 LAST = "last"
 FIRST_RGB = (FIRST, RGB)                      # uint8 [3, H, W] I_start
 LAST_RGB = (LAST, RGB)                        # uint8 [3, H, W] I_stop
-ANSWER_RGB = "answer_rgb"                     # under FIRST / LAST: uint8 [3, S, S] the env's answer camera (answer_size px; rollouts with one)
+ANSWER_RGB = "answer_rgb"                     # uint8 [3, S, S] the env's answer camera (answer_size px): under FIRST / LAST in rollouts with one; in the observation with answer_observation=True
 FIRST_ANSWER_RGB = (FIRST, ANSWER_RGB)
 LAST_ANSWER_RGB = (LAST, ANSWER_RGB)
 FIRST_DEPTH = (FIRST, DEPTH)                  # float16 [1, H, W] metres

@@ -37,6 +37,7 @@ from mqa_rl.envs.video import write_video
 from mqa_rl.evaluation.episode_metrics import mean_ci95, scene_bootstrap_ci95
 from mqa_rl.evaluation.policy_units import POLICIES, close_envs, run_units
 from mqa_rl.files import load_tensors, write_atomic
+from mqa_rl.modules.learned_stop import stop_env_kwargs
 from mqa_rl.modules.trained_policy import read_run_config
 from mqa_rl.transforms.push_memory import memory_radius
 
@@ -116,7 +117,9 @@ def main(cfg: DictConfig) -> None:
              "pusher": cfg.pusher, "push_memory": push_memory, "seed": int(cfg.seed), "episodes": int(cfg.episodes_per_level),
              "threshold": float(reward.get("simple_threshold", 0.2)), "run": str(cfg.run) if cfg.run else None,
              "checkpoint": cfg.checkpoint, "stop_margin": cfg.stop_margin, "stop_critic": cfg.stop_critic,
-             "video_episodes": int(cfg.video_episodes)}
+             "video_episodes": int(cfg.video_episodes),
+             # a stop reading the counting perception: its frames in every observation (every policy's env alike)
+             "frames": stop_env_kwargs(cfg.stop_critic, int(run_cfg.env.get("image_size", 224)) if run_cfg else 224)}
     metrics: dict = {}
     units = []
     metas = {level: episodes_meta(cfg, dataset, level, qtypes, max_pushes, reward, push_memory) for level in cfg.difficulties}

@@ -8,7 +8,9 @@ The policy pushes greedily without stopping (its best allowed push, ``env.max_pu
 targets' χ are kept (``trajectories/<level>.pt``, written per level: an interrupted run continues with the
 missing levels). ``value=chi`` (the default) stops where the targets' mean χ is lowest; ``value=uncountable`` where
 the fewest targets are below the perfect counter's line (the share of targets a counter misses: what R_c
-rewards, issue 40). A ``StopCritic`` is fitted by optimal stopping (``mqa_rl.training.optimal_stopping``) on
+rewards, issue 40). ``perception=<file>`` (e.g. ``checkpoints/vqa_counting/perception.pt``) adds its count of the
+asked class to every state's features (``PerceivedCount``; the env renders the answer camera at the perception's
+size in every state, ~0.2 s each at 448 px). A ``StopCritic`` is fitted by optimal stopping (``mqa_rl.training.optimal_stopping``) on
 the episodes of 80 % of the training scenes and scored on the other 20 % against the fixed rules (stop at
 once, after k pushes, never) and the hindsight best; then refitted on all episodes and written as
 ``stop_critic.pt`` with that report (``report.json``). The test split is never read.
@@ -28,7 +30,9 @@ from omegaconf import DictConfig, OmegaConf
 
 from mqa_rl import keys
 from mqa_rl.files import load_tensors, write_atomic
-from mqa_rl.modules.learned_stop import FEATURES, policy_fingerprint, policy_net, stop_features
+from mqa_rl.data.dataset import MQADataset
+from mqa_rl.modules.learned_stop import FEATURES, policy_fingerprint, policy_net, reading_env_kwargs, stop_features
+from mqa_rl.modules.perceived_count import READING, PerceivedCount, file_sha256, token_channels
 from mqa_rl.modules.stop_margin import StopMargin
 from mqa_rl.modules.trained_policy import load_greedy, read_run_config
 from mqa_rl.training.optimal_stopping import fit_stop_critic, fixed_rules, stopped_chi
@@ -45,9 +49,10 @@ def padded(x: torch.Tensor, length: int) -> torch.Tensor:
     return torch.cat([x, x[-1:].expand(pad, *x.shape[1:])]) if pad > 0 else x[:length]
 
 
-def collect_level(env, policy, net, episodes: int, max_pushes: int) -> dict:
-    """Never-stopping episodes of ``policy``: features [E, T, F], χ and the uncountable share [E, T + 1],
-    valid [E, T], scene ids."""
+def collect_level(env, policy, net, episodes: int, max_pushes: int, reading: PerceivedCount | None = None) -> dict:
+    """Never-stopping episodes of ``policy``: features [E, T, F] (with ``reading``'s after the shipped ones), χ and
+    the uncountable share [E, T + 1], valid [E, T], scene ids."""
+    width = len(FEATURES) + (len(READING) if reading is not None else 0)
     feats, chis, missed, valid, scenes = [], [], [], [], []
     with torch.no_grad():
         for _ in range(episodes):
@@ -56,6 +61,8 @@ def collect_level(env, policy, net, episodes: int, max_pushes: int) -> dict:
                 continue                                   # no target (a count of 0): χ undefined
             steps = rollout.shape[0]
             f = stop_features(net, rollout, max_pushes)
+            if reading is not None:
+                f = torch.cat([f, reading.read(rollout)], -1)
             chi = torch.cat([mean_target_chi(rollout).squeeze(-1), mean_target_chi(rollout["next"][-1:]).squeeze(-1)])
             miss = torch.cat([uncountable_share(rollout), uncountable_share(rollout["next"][-1:])])
             feats.append(padded(f, max_pushes))
@@ -64,7 +71,7 @@ def collect_level(env, policy, net, episodes: int, max_pushes: int) -> dict:
             valid.append(torch.arange(max_pushes) < min(steps, max_pushes))
             scenes.append(env.base_env.question.scene_id)
     if not feats:
-        return {"features": torch.zeros(0, max_pushes, len(FEATURES)), "chi": torch.zeros(0, max_pushes + 1),
+        return {"features": torch.zeros(0, max_pushes, width), "chi": torch.zeros(0, max_pushes + 1),
                 "uncountable": torch.zeros(0, max_pushes + 1), "valid": torch.zeros(0, max_pushes, dtype=torch.bool),
                 "scenes": []}
     return {"features": torch.stack(feats), "chi": torch.stack(chis), "uncountable": torch.stack(missed),
@@ -112,17 +119,23 @@ def main(cfg: DictConfig) -> None:
     max_pushes = int(run_cfg.env.max_pushes)
     push_memory = memory_radius(cfg.push_memory, run_cfg.env)
     torch.set_num_threads(int(cfg.threads))
+    reading, source = None, None
+    if cfg.perception:
+        reading = PerceivedCount.from_file(cfg.perception, token_channels(MQADataset(dataset)))
+        source = {"perception": str(cfg.perception), "sha256": file_sha256(cfg.perception),
+                  "token_channel": reading.token_channel.clone()}
+    frames = reading_env_kwargs(reading, int(run_cfg.env.get("image_size", 224)))
     levels, started = {}, time.time()
     for level in cfg.difficulties:
         env = make_mqa_env(dataset, OmegaConf.to_container(run_cfg.reward), split=cfg.split, difficulties=[level], max_pushes=max_pushes,
-                           question_types=list(run_cfg.env.question_types), push_memory=push_memory)
+                           question_types=list(run_cfg.env.question_types), push_memory=push_memory, **frames)
         try:
             actor, _, checkpoint = load_greedy(run, cfg.checkpoint, env)
             net = policy_net(actor)
             meta = {"run": str(run.resolve()), "checkpoint": Path(checkpoint).name, "policy_fingerprint": policy_fingerprint(net),
                     "dataset": str(Path(dataset).resolve()), "split": cfg.split, "level": level, "seed": int(cfg.seed),
                     "episodes": int(cfg.episodes_per_level), "max_pushes": max_pushes, "push_memory": push_memory,
-                    "measures": list(VALUES)}
+                    "measures": list(VALUES), **({"perception": source["sha256"]} if source else {})}
             path = out / "trajectories" / f"{level}.pt"
             reused = cached_trajectories(path, meta)
             if reused is not None:
@@ -131,7 +144,7 @@ def main(cfg: DictConfig) -> None:
                 continue
             env.base_env.set_seed(int(cfg.seed))
             tick = time.time()
-            data = collect_level(env, StopMargin(actor, float("inf")), net, int(cfg.episodes_per_level), max_pushes)
+            data = collect_level(env, StopMargin(actor, float("inf")), net, int(cfg.episodes_per_level), max_pushes, reading)
             buffer = io.BytesIO()
             torch.save({"meta": meta, "data": data}, buffer)
             write_atomic(path, buffer.getvalue())
@@ -164,6 +177,7 @@ def main(cfg: DictConfig) -> None:
     meta = {"policy_fingerprint": policy_fingerprint(net), "run": str(run), "checkpoint": Path(checkpoint).name,
             "split": cfg.split, "episodes": int(data["chi"].shape[0]), "fit": fit_options, "push_memory": push_memory,
             "value": value}
+    critic.reading_source = source
     critic.save(out / "stop_critic.pt", meta)
     write_atomic(out / "report.json", json.dumps(report, indent=2))
     write_atomic(out / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))   # with the results it made, not before

@@ -41,6 +41,7 @@ from mqa_rl.collectors.ray_pool import RayPool, check_backend, ray_session
 from mqa_rl.collectors.store import EpisodeStore
 from mqa_rl.envs.sapien_bin import SapienBinEnv
 from mqa_rl.modules.frozen_policies import is_deterministic, make_frozen_policy, resolve_checkpoint
+from mqa_rl.modules.learned_stop import stop_env_kwargs
 from mqa_rl.transforms.episode_stats import mean_target_chi
 from mqa_rl.transforms.mqa_env import make_mqa_env
 
@@ -215,6 +216,12 @@ def collect_rollouts(out_dir, *, dataset, policy, split: str, question_types=("c
     env_kwargs = {"max_pushes": int(max_pushes), "image_size": int(image_size), "pusher": pusher}
     if answer_size is not None and int(answer_size) != int(image_size):     # absent otherwise: older stores stay resumable
         env_kwargs["answer_size"] = int(answer_size)
+    frames = stop_env_kwargs(spec.get("stop_critic"), image_size)           # a stop reading the counting perception
+    if frames and env_kwargs.get("answer_size", frames["answer_size"]) != frames["answer_size"]:
+        raise ValueError(f"the policy's stop reads the counting perception on {frames['answer_size']}-px frames and the "
+                         f"env's answer camera renders {answer_size} px: set collection.env.answer_size="
+                         f"{frames['answer_size']}")
+    env_kwargs.update(frames)
     run = {"max_pushes": int(max_pushes), "seed": int(seed), "store_depth": bool(store_depth),
            "store_object_map": bool(store_object_map)}
     meta = {"schema": SCHEMA, "kind": "rollouts",

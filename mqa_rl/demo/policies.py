@@ -114,6 +114,10 @@ class PolicyRegistry:
         except (OSError, ValueError) as error:
             self.problems.append((label, str(error)[:400]))
             return
+        if critic.reading is not None:
+            self.problems.append((label, "this stop reads the counting perception in every state, which the demo does "
+                                         "not render: roll it out with recipes/evaluate_policy.py or collect_rollouts.py"))
+            return
         wanted = meta.get("policy_fingerprint")
         found = False
         for entry in [e for e in self.entries.values() if e.is_q_network]:

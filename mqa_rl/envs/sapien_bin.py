@@ -25,7 +25,9 @@ Task sheet
 * **Answer camera**: ``answer_size`` (a multiple of ``image_size``, e.g. 448) adds a second camera at the same
   pose and field of view; ``env.answer_image()`` renders the scene as it stands through it. The answering half
   reads I_start / I_stop there (small targets are slivers at 224 px: docs/perception.md, "Resolution") while the
-  observation, and with it the push grid, stays at ``image_size``.
+  observation, and with it the push grid, stays at ``image_size``. ``answer_observation=True`` puts that image in
+  every observation as well (``answer_rgb``; ~0.2 s a state at 448 px): for a policy that reads the finer view as it
+  acts (a stop reading the counting perception, ``mqa_rl.modules.perceived_count``).
 * **Reward**: always 0 here. The env measures; ``mqa_rl.transforms`` turn measurements into reward.
 
 >>> env = SapienBinEnv("data/mqa", split="train", question_types=["counting"])   # doctest: +SKIP
@@ -87,6 +89,7 @@ class SapienBinEnv(EnvBase):
         question_types=None,
         image_size: int = 224,
         answer_size: int | None = None,
+        answer_observation: bool = False,
         max_pushes: int = 10,
         settle_steps: int = 240,
         settle_speed: float = 0.005,
@@ -105,6 +108,10 @@ class SapienBinEnv(EnvBase):
         base = self.dataset.camera
         self.camera = CameraSpec(image_size, image_size, base.fovy_deg, base.distance, base.near, base.far)
         self.answer_camera = _answer_camera(self.camera, answer_size)
+        if answer_observation and self.answer_camera is None:
+            raise ValueError(f"answer_observation=True puts the answer camera's image in every observation: give "
+                             f"answer_size (a multiple of image_size={image_size}, e.g. {2 * image_size}), now {answer_size!r}")
+        self.answer_observation = bool(answer_observation)
         self.push_length = self.camera.floor_width() / 4
         self.max_pushes = max_pushes
         self.settle_steps = settle_steps
@@ -150,6 +157,9 @@ class SapienBinEnv(EnvBase):
             action_mask=Binary(n=actions.NUM_ACTIONS, shape=(actions.NUM_ACTIONS,), dtype=torch.bool),
             info=info,
         )
+        if self.answer_observation:
+            size = self.answer_camera.height
+            self.observation_spec[keys.ANSWER_RGB] = Bounded(0, 255, shape=(3, size, size), dtype=torch.uint8)
         self.action_spec = Categorical(actions.NUM_ACTIONS, shape=(), dtype=i64)
         # Read by reset (reset returns -1): declared as state so that a TransformedEnv passes it on.
         self.state_spec = Composite({keys.RESET_QUESTION: Bounded(-1, len(self.dataset.questions) - 1,
@@ -321,16 +331,16 @@ class SapienBinEnv(EnvBase):
             "target_cells": torch.from_numpy(self._target_cells(m["seg"])),
         }
         info.update({k[1]: v for k, v in _execution_info(push).items()})
-        return TensorDict(
-            {
-                keys.RGB: torch.from_numpy(np.ascontiguousarray(m["rgb"].transpose(2, 0, 1))),
-                keys.DEPTH: torch.from_numpy(m["depth"][None].copy()),
-                keys.QUESTION: self._tokens.clone(),
-                keys.ACTION_MASK: actions.start_points_mask(self.dataset.bin, self._starts),
-                keys.INFO: info,
-            },
-            batch_size=[],
-        )
+        obs = {
+            keys.RGB: torch.from_numpy(np.ascontiguousarray(m["rgb"].transpose(2, 0, 1))),
+            keys.DEPTH: torch.from_numpy(m["depth"][None].copy()),
+            keys.QUESTION: self._tokens.clone(),
+            keys.ACTION_MASK: actions.start_points_mask(self.dataset.bin, self._starts),
+            keys.INFO: info,
+        }
+        if self.answer_observation:
+            obs[keys.ANSWER_RGB] = self.answer_image()
+        return TensorDict(obs, batch_size=[])
 
     def _target_cells(self, seg: np.ndarray) -> np.ndarray:
         """Fraction of each action-grid cell's pixels where a target is visible (from the segmentation)."""

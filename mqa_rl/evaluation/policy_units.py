@@ -44,7 +44,8 @@ def unit_env(setup: dict, level: str):
     if level not in _ENVS:
         _ENVS[level] = make_mqa_env(setup["dataset"], setup["reward"], episode_stats=True, split=setup["split"],
                                     difficulties=[level], question_types=setup["qtypes"], max_pushes=setup["max_pushes"],
-                                    pusher=setup["pusher"], push_memory=setup["push_memory"])
+                                    pusher=setup["pusher"], push_memory=setup["push_memory"],
+                                    **setup.get("frames", {}))
     return _ENVS[level]
 
 

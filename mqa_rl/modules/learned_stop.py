@@ -11,7 +11,9 @@ that change of χ from what the policy sees (``stop_features``); it is fitted by
 (``recipes/fit_stop.py``), never on the test split.
 
 A critic belongs to one policy: its file records the policy's weight fingerprint and a critic fitted
-for other weights is refused.
+for other weights is refused. A critic fitted with ``recipes/fit_stop.py perception=<file>`` also reads the
+counting perception's count of the asked class (``PerceivedCount``, features ``READING`` after ``FEATURES``); its
+file records the perception's path and SHA-256 and the question tokens' classes.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from torch import nn
 from mqa_rl import keys
 from mqa_rl.envs import actions
 from mqa_rl.files import load_versioned, save_versioned
+from mqa_rl.modules.perceived_count import READING, PerceivedCount
 from mqa_rl.modules.push_qnet import PushQNet
 from mqa_rl.modules.q_override import best_allowed_push, take_action
 
@@ -85,11 +88,16 @@ def stop_features(net: PushQNet, td: TensorDictBase, max_pushes: int) -> torch.T
 
 
 class StopCritic(nn.Module):
-    """Features [*B, F] -> predicted change of the targets' mean χ if the policy pushes on (< 0: it uncovers)."""
+    """Features [*B, F] -> predicted change of the targets' mean χ if the policy pushes on (< 0: it uncovers).
+
+    ``reading``: the ``PerceivedCount`` whose features follow ``FEATURES`` (None: the shipped features alone);
+    ``reading_source``: what its file records of it (perception path and SHA-256, the tokens' classes)."""
 
     def __init__(self, num_features: int = len(FEATURES), hidden: int = 32):
         super().__init__()
         self.hidden = int(hidden)
+        self.reading: PerceivedCount | None = None
+        self.reading_source: dict | None = None
         self.register_buffer("mean", torch.zeros(num_features))
         self.register_buffer("std", torch.ones(num_features))
         self.mlp = nn.Sequential(nn.Linear(num_features, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh(),
@@ -100,13 +108,26 @@ class StopCritic(nn.Module):
         self.mean.copy_(flat.mean(0))
         self.std.copy_(flat.std(0).clamp(min=1e-6))
 
+    @property
+    def feature_names(self) -> list[str]:
+        return [*FEATURES, *(READING if self.reading_source is not None else ())]
+
+    def read(self, net: PushQNet, td: TensorDictBase, max_pushes: int) -> torch.Tensor:
+        """[*B, F]: ``stop_features``, then the perceived count when this critic reads it."""
+        features = stop_features(net, td, max_pushes)
+        if self.reading is None:
+            return features
+        return torch.cat([features, self.reading.read(td).reshape(*features.shape[:-1], len(READING))], -1)
+
     def forward(self, features: torch.Tensor) -> torch.Tensor:
         return self.mlp((features - self.mean) / self.std).squeeze(-1)
 
     def save(self, path: str | Path, meta: dict) -> Path:
         """Weights, sizes and ``meta`` (the policy fingerprint, how it was fitted), written atomically."""
-        blob = {"features": list(FEATURES), "hidden": self.hidden,
-                "state": {k: v.detach().cpu() for k, v in self.state_dict().items()}, "meta": dict(meta)}
+        state = {k: v.detach().cpu() for k, v in self.state_dict().items() if not k.startswith("reading.")}
+        blob = {"features": self.feature_names, "hidden": self.hidden, "state": state, "meta": dict(meta)}
+        if self.reading_source is not None:
+            blob["reading"] = dict(self.reading_source)
         return save_versioned(path, CRITIC_FORMAT, CRITIC_VERSION, blob)
 
     @classmethod
@@ -116,14 +137,32 @@ class StopCritic(nn.Module):
         if path.is_dir():
             path = path / "stop_critic.pt"
         blob = load_versioned(path, CRITIC_FORMAT, CRITIC_VERSION, what="stop-critic file", hint=HINT)
-        if list(blob["features"]) != list(FEATURES):
-            raise ValueError(f"{path} reads features {blob['features']}, this mqa_rl computes {list(FEATURES)}; {HINT}")
-        critic = cls(len(FEATURES), int(blob["hidden"]))
+        source = blob.get("reading")
+        names = [*FEATURES, *(READING if source is not None else ())]
+        if list(blob["features"]) != names:
+            raise ValueError(f"{path} reads features {blob['features']}, this mqa_rl computes {names}; {HINT}")
+        critic = cls(len(names), int(blob["hidden"]))
         try:
             critic.load_state_dict(blob["state"])
         except (RuntimeError, KeyError) as error:
             raise ValueError(f"{path} holds mismatched weights ({error}); {HINT}") from error
+        if source is not None:
+            critic.reading_source = dict(source)
+            critic.reading = PerceivedCount.from_file(source["perception"], source["token_channel"], source["sha256"])
         return critic.eval(), dict(blob.get("meta", {}))
+
+
+def reading_env_kwargs(reading: PerceivedCount | None, image_size: int) -> dict:
+    """The env options a perceived count needs: its perception's frames in every observation (the answer camera at
+    the perception's size, when that is finer than ``image_size``); {} when it reads ``rgb`` or there is none."""
+    if reading is None or reading.input_size <= int(image_size):
+        return {}
+    return {"answer_size": reading.input_size, "answer_observation": True}
+
+
+def stop_env_kwargs(path: str | Path | None, image_size: int) -> dict:
+    """``reading_env_kwargs`` of the critic at ``path`` (None: no critic, {})."""
+    return {} if path is None else reading_env_kwargs(StopCritic.load(path)[0].reading, image_size)
 
 
 class LearnedStop(TensorDictModuleBase):
@@ -154,7 +193,7 @@ class LearnedStop(TensorDictModuleBase):
         q = tensordict.get(keys.ACTION_VALUE)
         _, best_push, any_push = best_allowed_push(q)
         with torch.no_grad():
-            gain = self.critic(stop_features(self.net, tensordict, self.max_pushes))
+            gain = self.critic(self.critic.read(self.net, tensordict, self.max_pushes))
         action = tensordict.get(keys.ACTION)
         push_on = (any_push & (gain < 0)).reshape(action.shape)
         chosen = torch.where(push_on, best_push.reshape(action.shape), torch.full_like(action, actions.STOP))

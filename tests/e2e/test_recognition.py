@@ -305,6 +305,28 @@ def test_pretrain_then_train_dqn_from_the_recognition_file(small_dataset_dir, tm
                           f"stop_critic={tmp_path / 'stop'}", "episodes_per_level=1", "difficulties=[hard]", "policies=[greedy]",
                           "video_episodes=0", f"out_dir={ev}"], capture_output=True, text=True, timeout=600, env=ENV, cwd=tmp_path)
     assert out.returncode != 0 and "another policy" in out.stderr          # fitted for the geometric student, not this run
+    # a stop that also reads a counting perception trained at a finer render (448 px): the env renders its answer
+    # camera in every state, the critic's file names the perception, a collection of its system runs with those frames
+    from mqa_rl.collectors.rollouts import collect_rollouts
+    from mqa_rl.data.dataset import MQADataset
+    from mqa_rl.modules.learned_stop import StopCritic
+    from mqa_rl.modules.perception import CountingPerception, save_perception
+
+    classes = len(MQADataset(small_dataset_dir).classes)
+    perception = save_perception(CountingPerception(1 + classes, widths=(8, 8, 16, 16), image_size=448),
+                                 tmp_path / "perception.pt", {})
+    out = subprocess.run([*fit[:3], f"out_dir={tmp_path / 'stop_read'}", *fit[4:], "value=uncountable",
+                          f"perception={perception}"], capture_output=True, text=True, timeout=600, env=ENV, cwd=tmp_path)
+    assert out.returncode == 0 and "stop critic:" in out.stdout, out.stdout[-2000:] + out.stderr[-3000:]
+    critic, _ = StopCritic.load(tmp_path / "stop_read")
+    assert critic.reading is not None and critic.reading.input_size == 448
+    plan = dict(dataset=small_dataset_dir, policy={**spec, "stop_critic": str(tmp_path / "stop_read")}, split="train",
+                levels=["hard"], max_per_group=1, max_pushes=2, workers=1, store_depth=False, progress=False)
+    collect_rollouts(tmp_path / "read_rollouts", **plan)
+    env_meta = json.loads((tmp_path / "read_rollouts" / "meta.json").read_text())["env"]
+    assert env_meta["answer_size"] == 448 and env_meta["answer_observation"] is True
+    with pytest.raises(ValueError, match="collection.env.answer_size=448"):
+        collect_rollouts(tmp_path / "read_other", **plan, answer_size=672)
 
 
 def net_checkpoint_name(run: Path) -> str:

@@ -222,3 +222,40 @@ def test_an_answer_size_off_the_env_grid_is_refused(small_dataset, size):
     from mqa_rl.envs.sapien_bin import SapienBinEnv
     with pytest.raises(ValueError, match="answer_size must be a multiple of image_size"):
         SapienBinEnv(small_dataset, split=None, answer_size=size)
+
+
+def test_the_answer_observation_puts_the_answer_cameras_frame_in_every_state(small_dataset):
+    """``answer_observation``: what a stop reading the counting perception acts on (the frame the VQA reads), in
+    the spec, at reset and after a push and a stop; refused without an answer camera."""
+    from mqa_rl.envs import actions
+    from mqa_rl.envs.sapien_bin import SapienBinEnv
+    with pytest.raises(ValueError, match="give answer_size"):
+        SapienBinEnv(small_dataset, split=None, answer_observation=True)
+    env = SapienBinEnv(small_dataset, split=None, answer_size=448, answer_observation=True, max_pushes=2)
+    try:
+        assert env.observation_spec[keys.ANSWER_RGB].shape == (3, 448, 448)
+        td = env.reset(question_id=small_dataset.questions[0].id)
+        assert torch.equal(td[keys.ANSWER_RGB], env.answer_image())
+        td = env.step(td.set(keys.ACTION, torch.tensor(int(td[keys.ACTION_MASK][:actions.STOP].nonzero()[0]))))["next"]
+        assert td[keys.ANSWER_RGB].shape == (3, 448, 448) and torch.equal(td[keys.ANSWER_RGB], env.answer_image())
+        stopped = env.step(td.set(keys.ACTION, torch.tensor(actions.STOP)))["next"]
+        assert torch.equal(stopped[keys.ANSWER_RGB], td[keys.ANSWER_RGB])
+    finally:
+        env.close()
+    plain = SapienBinEnv(small_dataset, split=None, answer_size=448)
+    try:
+        assert keys.ANSWER_RGB not in plain.reset(question_id=small_dataset.questions[0].id).keys()
+    finally:
+        plain.close()
+
+
+def test_each_asked_class_has_a_token_that_names_it(small_dataset):
+    """The perceived count finds the asked class from the question's tokens alone (``token_channels``)."""
+    from mqa_rl.modules.perceived_count import PerceivedCount, token_channels
+    from mqa_rl.modules.perception import CountingPerception
+    table = token_channels(small_dataset)
+    reading = PerceivedCount(CountingPerception(1 + len(small_dataset.classes), widths=(8, 8, 16, 16)), table)
+    single = [q for q in small_dataset.questions if len(q.classes) == 1]
+    tokens = torch.nn.utils.rnn.pad_sequence([torch.tensor(q.tokens) for q in single], batch_first=True)
+    assert reading.asked_channel(tokens).tolist() == [1 + small_dataset.classes.index(q.classes[0]) for q in single]
+    assert table[small_dataset.vocab.encode("how many are there in the bin ?")].eq(0).all()

@@ -10,7 +10,11 @@ from torchrl.data import Categorical
 
 from mqa_rl import keys
 from mqa_rl.envs import actions
-from mqa_rl.modules.learned_stop import FEATURES, LearnedStop, StopCritic, policy_fingerprint, stop_features
+from mqa_rl.modules.learned_stop import (FEATURES, LearnedStop, StopCritic, policy_fingerprint, reading_env_kwargs,
+                                        stop_features)
+from mqa_rl.modules.perceived_count import READING, PerceivedCount, file_sha256
+from mqa_rl.modules.perception import CountingPerception, save_perception
+from mqa_rl.modules.vote_counting import MAX_COUNT
 from mqa_rl.modules.push_policy import make_q_actor
 from mqa_rl.modules.push_qnet import PushQNet
 from mqa_rl.training.optimal_stopping import fit_stop_critic, fixed_rules, realised_values, stopped_chi
@@ -165,3 +169,58 @@ def test_the_shipped_countable_critic_minimises_what_the_counter_misses():
     critic, meta = StopCritic.load(ROOT / "checkpoints" / "stop_countable")
     assert meta["value"] == "uncountable" and meta["run"] == "runs/countable_rl/countable/dqn"
     assert critic(torch.zeros(2, len(FEATURES))).shape == (2,)
+
+
+def _reading(tmp_path, classes=4):
+    """A tiny counting perception on file and the PerceivedCount over it (token t names class channel t here)."""
+    torch.manual_seed(0)
+    path = save_perception(CountingPerception(1 + classes, widths=(8, 8, 16, 16)), tmp_path / "perception.pt", {})
+    table = torch.zeros(VOCAB, dtype=torch.int64)
+    table[1:1 + classes] = torch.arange(1, 1 + classes)
+    return PerceivedCount.from_file(path, table), path
+
+
+def test_the_perceived_count_reads_the_asked_class_on_the_finest_frame_it_is_given(tmp_path):
+    reading, _ = _reading(tmp_path)
+    size = reading.input_size
+    g = torch.Generator().manual_seed(2)
+    frames = torch.randint(0, 256, (2, 3, size, size), dtype=torch.uint8, generator=g)
+    question = torch.tensor([[9, 9, 3, 9], [9, 2, 4, 9]])                       # asks class 3, then class 2
+    out = reading(frames, question)
+    assert out.shape == (2, len(READING)) and torch.isfinite(out).all()
+    counts = reading.perception.counts(frames)                                  # [B, classes]
+    assert out[:, 0].tolist() == [float(min(counts[0, 2], MAX_COUNT)), float(min(counts[1, 1], MAX_COUNT))]
+    td = TensorDict({keys.RGB: frames[:, :, ::2, ::2], keys.ANSWER_RGB: frames, keys.QUESTION: question}, batch_size=[2])
+    torch.testing.assert_close(reading.read(td), out)                          # the answer camera, not the coarser rgb
+    with pytest.raises(ValueError, match="answer_observation=true"):
+        reading.read(td.exclude(keys.ANSWER_RGB))
+    with pytest.raises(ValueError, match="names no class"):
+        reading(frames, torch.tensor([[9, 9, 9, 9], [9, 2, 9, 9]]))
+
+
+def test_a_critic_reading_the_perception_round_trips_and_refuses_another_perception_file(tmp_path):
+    actor, net = _actor()
+    reading, path = _reading(tmp_path)
+    width = len(FEATURES) + len(READING)
+    critic = StopCritic(width)
+    critic.reading_source = {"perception": str(path), "sha256": file_sha256(path), "token_channel": reading.token_channel}
+    saved = critic.save(tmp_path / "stop" / "stop_critic.pt", {"policy_fingerprint": policy_fingerprint(net)})
+    loaded, _ = StopCritic.load(saved)
+    assert loaded.feature_names == [*FEATURES, *READING] and loaded.reading is not None
+    x = torch.randn(3, width)
+    torch.testing.assert_close(loaded(x), critic(x))
+    size = reading.input_size
+    td = _state()
+    td.set(keys.ANSWER_RGB, torch.randint(0, 256, (2, 3, size, size), dtype=torch.uint8))
+    td.set(keys.QUESTION, torch.tensor([[1, 5, 9, 9, 9, 9], [2, 9, 9, 9, 9, 9]]))
+    stop = LearnedStop.from_file(actor, saved, 10)
+    out = stop(td.clone())
+    features = loaded.read(net, actor(td.clone()), 10)
+    assert features.shape == (2, width)
+    torch.testing.assert_close(features[:, len(FEATURES):], reading.read(td))
+    assert out[keys.ACTION].shape == (2,)
+    assert reading_env_kwargs(loaded.reading, image_size=size // 2) == {"answer_size": size, "answer_observation": True}
+    assert reading_env_kwargs(loaded.reading, image_size=size) == {} and reading_env_kwargs(None, 224) == {}
+    save_perception(CountingPerception(5, widths=(8, 8, 16, 16)), path, {})   # another perception at that path
+    with pytest.raises(ValueError, match="SHA-256 differs"):
+        StopCritic.load(saved)
