@@ -16,6 +16,7 @@ and prints the share of targets the stopped frame leaves uncountable, the share 
 countable, and the differences to base paired by episode, bootstrapped by scene; and how often the perceived count
 of the asked class rises after a push against how often the share a counter misses falls (its flicker). A perception
 that reads a finer render (the shipped 448-px file) reads each state through the env's answer camera, as the VQA does.
+The reading is ``PerceivedCount``'s, what ``recipes/fit_stop.py perception=<file>`` builds into the stop.
 
     python benchmarks/stop_perception_cv.py run=checkpoints/dqn_countable out=runs/stop/perception400 episodes=400
     python benchmarks/stop_perception_cv.py run=checkpoints/dqn_countable out=runs/stop/perception448 episodes=200   # 29 min
@@ -32,14 +33,13 @@ import torch
 from omegaconf import OmegaConf
 
 from mqa_rl import keys
-from mqa_rl.data.dataset import LEVELS
+from mqa_rl.data.dataset import LEVELS, MQADataset
 from mqa_rl.evaluation.episode_metrics import scene_bootstrap_ci95
 from mqa_rl.files import load_tensors, write_atomic
-from mqa_rl.modules.learned_stop import policy_net, stop_features
-from mqa_rl.modules.perception import load_perception
+from mqa_rl.modules.learned_stop import policy_net, reading_env_kwargs, stop_features
+from mqa_rl.modules.perceived_count import PerceivedCount, token_channels
 from mqa_rl.modules.stop_margin import StopMargin
 from mqa_rl.modules.trained_policy import load_greedy, read_run_config
-from mqa_rl.modules.vote_counting import MAX_COUNT
 from mqa_rl.training.optimal_stopping import fit_stop_critic, fixed_rules, stopped_chi
 from mqa_rl.transforms.episode_stats import uncountable_share
 from mqa_rl.transforms.mqa_env import make_mqa_env
@@ -50,54 +50,28 @@ def padded(x: torch.Tensor, length: int) -> torch.Tensor:
     return torch.cat([x, x[-1:].expand(pad, *x.shape[1:])]) if pad > 0 else x[:length]
 
 
-def asked_reading(perception, rgb: torch.Tensor, channel: int) -> torch.Tensor:
-    """[T, 3 + TOP + 2 + 1]: the asked class's row of the VQA's count features, its count as a number, and the
-    image-wide count."""
-    feats = perception.count_features(rgb)                       # [T, K, F]
-    row = feats[:, channel]
-    count = row[:, :MAX_COUNT + 1].argmax(-1, keepdim=True).float()
-    return torch.cat([count, row[:, MAX_COUNT + 1:], feats[:, 0, :1]], -1)
-
-
-class AnswerFrames:
-    """The policy, recording the answer camera's image of every state it acts in (the frames a finer perception reads)."""
-
-    def __init__(self, policy, env):
-        self.policy, self.env, self.frames = policy, env, []
-
-    def __call__(self, td):
-        self.frames.append(self.env.base_env.answer_image())
-        return self.policy(td)
-
-
-def collect(run: Path, perception, level: str, episodes: int, seed: int) -> dict:
+def collect(run: Path, perception: str, level: str, episodes: int, seed: int) -> dict:
     cfg = read_run_config(run)
     max_pushes = int(cfg.env.max_pushes)
-    size = perception.input_size
-    finer = {"answer_size": size} if size != int(cfg.env.image_size) else {}
+    read = PerceivedCount.from_file(perception, token_channels(MQADataset(str(cfg.dataset))))
     env = make_mqa_env(str(cfg.dataset), OmegaConf.to_container(cfg.reward), split="train", difficulties=[level], max_pushes=max_pushes,
-                       question_types=list(cfg.env.question_types), push_memory=memory_radius(None, cfg.env), **finer)
+                       question_types=list(cfg.env.question_types), push_memory=memory_radius(None, cfg.env),
+                       **reading_env_kwargs(read, int(cfg.env.image_size)))
     try:
         actor, _, _ = load_greedy(run, None, env)
         net = policy_net(actor)
         policy = StopMargin(actor, float("inf"))
-        if finer:                                                 # the frames the finer perception reads
-            policy = AnswerFrames(policy, env)
         env.base_env.set_seed(seed)
         base, reading, missed, valid, scenes = [], [], [], [], []
         with torch.no_grad():
             for _ in range(episodes):
-                if finer:
-                    policy.frames = []
                 rollout = env.rollout(max_pushes + 1, policy, break_when_any_done=True)
                 if not bool(rollout[0].get(keys.TARGET_MASK).any()):
                     continue
                 question = env.base_env.question
-                channel = 1 + env.base_env.dataset.classes.index(question.classes[0])
                 steps = rollout.shape[0]
                 base.append(padded(stop_features(net, rollout, max_pushes), max_pushes))
-                frames = torch.stack(policy.frames) if finer else rollout.get(keys.RGB)
-                reading.append(padded(asked_reading(perception, frames, channel), max_pushes))
+                reading.append(padded(read.read(rollout), max_pushes))
                 miss = torch.cat([uncountable_share(rollout), uncountable_share(rollout["next"][-1:])])
                 missed.append(padded(miss, max_pushes + 1))
                 valid.append(torch.arange(max_pushes) < min(steps, max_pushes))
@@ -133,7 +107,6 @@ def flicker(reading: torch.Tensor, uncountable: torch.Tensor, valid: torch.Tenso
 def main(run: str, out: str, episodes: str = "400", perception: str = "checkpoints/vqa_counting/perception.pt",
          seed: str = "7", folds: int = 5) -> None:
     torch.set_num_threads(2)
-    model, _ = load_perception(perception)
     levels = {}
     for level in LEVELS:
         path = Path(out) / f"{level}.pt"
@@ -141,7 +114,7 @@ def main(run: str, out: str, episodes: str = "400", perception: str = "checkpoin
             levels[level] = load_tensors(path, what="probe trajectories", hint="delete it to collect again")
             continue
         tick = time.time()
-        levels[level] = collect(Path(run), model, level, int(episodes), int(seed))
+        levels[level] = collect(Path(run), perception, level, int(episodes), int(seed))
         buffer = io.BytesIO()
         torch.save(levels[level], buffer)
         write_atomic(path, buffer.getvalue())
