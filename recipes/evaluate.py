@@ -195,11 +195,18 @@ def evaluate(cfg: DictConfig) -> dict:
     if "no_manipulation" in data:
         n_rec, n_right = data["no_manipulation"]
         n_mask = n_rec.get(keys.TYPE_LABEL) == QUESTION_TYPES.index("counting")
+        n_counter = ans.counter_right(n_rec, ds.answers, keys.LAST)[n_mask]     # the counter on I_start
         for name, (records, right) in data.items():
             counting = records.get(keys.TYPE_LABEL) == QUESTION_TYPES.index("counting")
             if name != "no_manipulation":
                 results["systems"][name]["vs_no_manipulation_by_scene"] = {
                     lv: ans.paired_difference_by_scene(right, records, n_right[n_mask], n_rec[n_mask],
+                                                       mask_a=counting & (records.get(keys.LEVEL) == i))
+                    for i, lv in enumerate(LEVELS)}
+                # what the policy's stop leaves a perfect counter, against not pushing (issue 40's measure)
+                results["systems"][name]["counter_stop_vs_no_manipulation_by_scene"] = {
+                    lv: ans.paired_difference_by_scene(ans.counter_right(records, ds.answers, keys.LAST), records,
+                                                       n_counter, n_rec[n_mask],
                                                        mask_a=counting & (records.get(keys.LEVEL) == i))
                     for i, lv in enumerate(LEVELS)}
     # paired differences to the answer prior (the training split's majority answer per type and level; a

@@ -129,6 +129,11 @@ def test_evaluate_writes_table3_and_names_what_is_missing(small_dataset, trained
         assert mean == pytest.approx(sys_res["random"]["accuracy"]["counting"][lv]["accuracy"])
     diff = sys_res["random"]["vs_no_manipulation_by_scene"]["easy"]
     assert diff[1] <= diff[0] <= diff[2] and "no manipulation" in (out / "by_scene.md").read_text()
+    for lv in ("easy", "hard"):        # the counter on I_stop against I_start, paired: the difference of the two rates
+        counter = sys_res["random"]["counter_stop_vs_no_manipulation_by_scene"][lv]
+        rates = [sys_res[s]["counter_last"]["counting"][lv]["accuracy"] for s in ("random", "no_manipulation")]
+        assert counter[0] == pytest.approx(rates[0] - rates[1]) and counter[1] <= counter[0] <= counter[2]
+    assert "perfect counter on I_stop − no manipulation" in (out / "by_scene.md").read_text()
     assert json.loads((out / "results.json").read_text())["systems"]["random"]["episodes"] == 4
 
 
