@@ -19,6 +19,7 @@ from pathlib import Path
 import torch
 from omegaconf import OmegaConf
 
+from mqa_rl import keys
 from mqa_rl.modules.learned_stop import LearnedStop, StopCritic, policy_fingerprint, policy_net
 from mqa_rl.modules.random_policy import RandomMQAPolicy
 from mqa_rl.modules.trained_policy import load_greedy, run_checkpoints
@@ -53,6 +54,12 @@ class PolicyEntry:
         return self.actor is not None
 
 
+def _observed_frame_size(env) -> int:
+    """The finest frame ``env`` puts in every observation (``rgb``, or the answer camera's with answer_observation)."""
+    spec = env.observation_spec
+    return max(spec[k].shape[-1] for k in (keys.RGB, keys.ANSWER_RGB) if k in spec.keys())
+
+
 class PolicyRegistry:
     """Usable policies by display name, and the unusable candidates with their reasons."""
 
@@ -61,6 +68,8 @@ class PolicyRegistry:
         self.max_pushes = max_pushes
         self.entries: dict[str, PolicyEntry] = {RANDOM: PolicyEntry(RANDOM), RANDOM_MASKED: PolicyEntry(RANDOM_MASKED, masked=True)}
         self.problems: list[tuple[str, str]] = []         # (what, why it cannot be used)
+        self.passed_over: list[tuple[str, str]] = []      # (what, why this demo does not offer it): usable elsewhere
+        self._frames = _observed_frame_size(env)
         if self.runs_dir is not None and self.runs_dir.is_dir():
             stops = []
             for folder in self._run_folders():
@@ -114,9 +123,10 @@ class PolicyRegistry:
         except (OSError, ValueError) as error:
             self.problems.append((label, str(error)[:400]))
             return
-        if critic.reading is not None:
-            self.problems.append((label, "this stop reads the counting perception in every state, which the demo does "
-                                         "not render: roll it out with recipes/evaluate_policy.py or collect_rollouts.py"))
+        if critic.reading is not None and critic.reading.input_size > self._frames:
+            self.passed_over.append((label, f"its stop reads the counting perception on a {critic.reading.input_size}-px "
+                                            f"frame of every state, which this demo does not render (it would slow every "
+                                            f"push): roll it out with recipes/evaluate_policy.py or collect_rollouts.py"))
             return
         wanted = meta.get("policy_fingerprint")
         found = False
@@ -203,4 +213,6 @@ class PolicyRegistry:
             lines.append(f"Trained policies: {len(self.trained)} from `{self.runs_dir}`.")
         for what, why in self.problems:
             lines.append(f"- unusable `{what}`: {why}")
+        for what, why in self.passed_over:
+            lines.append(f"- not offered here `{what}`: {why}")
         return "\n".join(lines)

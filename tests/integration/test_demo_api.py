@@ -318,6 +318,9 @@ def test_the_shipped_checkpoints_folder_offers_every_policy_and_the_students_lea
     try:
         registry = PolicyRegistry(root / "checkpoints", env, max_pushes=3)
         assert not registry.problems, registry.problems
+        # the stop reading the counting perception on the answer camera's frame: this env renders none, so not offered
+        assert [what for what, _ in registry.passed_over] == ["stop_countable_perceived"]
+        assert "448-px" in registry.passed_over[0][1] and "not offered here" in registry.status()
         trained = registry.trained
         shipped_runs = {p.parent.parent.name for p in (root / "checkpoints").glob("*/checkpoints/checkpoint-*")}
         assert len(shipped_runs) == 5

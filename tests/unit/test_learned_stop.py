@@ -224,3 +224,12 @@ def test_a_critic_reading_the_perception_round_trips_and_refuses_another_percept
     save_perception(CountingPerception(5, widths=(8, 8, 16, 16)), path, {})   # another perception at that path
     with pytest.raises(ValueError, match="SHA-256 differs"):
         StopCritic.load(saved)
+
+
+def test_the_shipped_perceiving_critic_reads_the_shipped_perception_on_the_answer_camera():
+    critic, meta = StopCritic.load(ROOT / "checkpoints" / "stop_countable_perceived")
+    assert meta["value"] == "uncountable" and meta["run"] == "checkpoints/dqn_countable"
+    assert critic.feature_names == [*FEATURES, *READING] and critic.reading.input_size == 448
+    assert critic.reading_source["perception"] == "checkpoints/vqa_counting/perception.pt"
+    assert reading_env_kwargs(critic.reading, 224) == {"answer_size": 448, "answer_observation": True}
+    assert critic(torch.zeros(2, len(FEATURES) + len(READING))).shape == (2,)
