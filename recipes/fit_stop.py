@@ -29,8 +29,8 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 
 from mqa_rl import keys
-from mqa_rl.files import load_tensors, write_atomic
 from mqa_rl.data.dataset import MQADataset
+from mqa_rl.files import load_tensors, write_atomic
 from mqa_rl.modules.learned_stop import FEATURES, policy_fingerprint, policy_net, reading_env_kwargs, stop_features
 from mqa_rl.modules.perceived_count import READING, PerceivedCount, file_sha256, token_channels
 from mqa_rl.modules.stop_margin import StopMargin
