@@ -32,7 +32,7 @@ from mqa_rl import keys
 from mqa_rl.data.dataset import MQADataset
 from mqa_rl.files import load_tensors, write_atomic
 from mqa_rl.modules.learned_stop import FEATURES, policy_fingerprint, policy_net, reading_env_kwargs, stop_features
-from mqa_rl.modules.perceived_count import READING, PerceivedCount, file_sha256, token_channels
+from mqa_rl.modules.perceived_count import READING, PerceivedCount, token_channels
 from mqa_rl.modules.stop_margin import StopMargin
 from mqa_rl.modules.trained_policy import load_greedy, read_run_config
 from mqa_rl.training.optimal_stopping import fit_stop_critic, fixed_rules, stopped_chi
@@ -119,11 +119,7 @@ def main(cfg: DictConfig) -> None:
     max_pushes = int(run_cfg.env.max_pushes)
     push_memory = memory_radius(cfg.push_memory, run_cfg.env)
     torch.set_num_threads(int(cfg.threads))
-    reading, source = None, None
-    if cfg.perception:
-        reading = PerceivedCount.from_file(cfg.perception, token_channels(MQADataset(dataset)))
-        source = {"perception": str(cfg.perception), "sha256": file_sha256(cfg.perception),
-                  "token_channel": reading.token_channel.clone()}
+    reading = PerceivedCount.from_file(cfg.perception, token_channels(MQADataset(dataset))) if cfg.perception else None
     frames = reading_env_kwargs(reading, int(run_cfg.env.get("image_size", 224)))
     levels, started = {}, time.time()
     for level in cfg.difficulties:
@@ -135,7 +131,7 @@ def main(cfg: DictConfig) -> None:
             meta = {"run": str(run.resolve()), "checkpoint": Path(checkpoint).name, "policy_fingerprint": policy_fingerprint(net),
                     "dataset": str(Path(dataset).resolve()), "split": cfg.split, "level": level, "seed": int(cfg.seed),
                     "episodes": int(cfg.episodes_per_level), "max_pushes": max_pushes, "push_memory": push_memory,
-                    "measures": list(VALUES), **({"perception": source["sha256"]} if source else {})}
+                    "measures": list(VALUES), **({"perception": reading.sha256} if reading else {})}
             path = out / "trajectories" / f"{level}.pt"
             reused = cached_trajectories(path, meta)
             if reused is not None:
@@ -177,7 +173,7 @@ def main(cfg: DictConfig) -> None:
     meta = {"policy_fingerprint": policy_fingerprint(net), "run": str(run), "checkpoint": Path(checkpoint).name,
             "split": cfg.split, "episodes": int(data["chi"].shape[0]), "fit": fit_options, "push_memory": push_memory,
             "value": value}
-    critic.reading_source = source
+    critic.reading = reading
     critic.save(out / "stop_critic.pt", meta)
     write_atomic(out / "report.json", json.dumps(report, indent=2))
     write_atomic(out / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))   # with the results it made, not before

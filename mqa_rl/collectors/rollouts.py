@@ -104,6 +104,12 @@ def _chi(td) -> torch.Tensor:
     return torch.where(has_target, mean_target_chi(td).squeeze(-1), torch.tensor(float("nan")))
 
 
+def _answer_frame(env, td) -> torch.Tensor | None:
+    """The answer camera's image of the state ``td`` observes: the observation's own (``answer_observation``), else
+    rendered now (the env stands in that state)."""
+    return td.get(keys.ANSWER_RGB) if keys.ANSWER_RGB in td.keys() else env.answer_image()
+
+
 def run_question_episode(env: SapienBinEnv, policy, exploration, question_index: int, *, max_pushes: int,
                          slot: int = 0, repeat: int = 0, seed: int = 0, store_depth: bool = True,
                          store_object_map: bool = True) -> TensorDict:
@@ -112,7 +118,7 @@ def run_question_episode(env: SapienBinEnv, policy, exploration, question_index:
     torch.manual_seed(episode_seed(seed, slot))
     td = env.reset(question_id=question.id)
     first_map = object_map(env) if store_object_map else None
-    first_answer = env.answer_image()
+    first_answer = _answer_frame(env, td)
     with torch.no_grad(), set_exploration_type(exploration):
         traj = env.rollout(max_pushes + 1, policy, auto_reset=False, tensordict=td, break_when_any_done=True)
     if not bool(traj["next", "done"][-1].item()):
@@ -120,7 +126,7 @@ def run_question_episode(env: SapienBinEnv, policy, exploration, question_index:
                            f"max_pushes larger than {max_pushes}?")
     first, last = traj[0], traj["next"][-1]
     last_map = object_map(env) if store_object_map else None
-    last_answer = env.answer_image()
+    last_answer = _answer_frame(env, last)
     scene = env.dataset.scene(question.scene_id)
     scalar = lambda v, dtype=torch.int64: torch.as_tensor(v, dtype=dtype).reshape(())   # noqa: E731
     return TensorDict({

@@ -91,13 +91,12 @@ class StopCritic(nn.Module):
     """Features [*B, F] -> predicted change of the targets' mean χ if the policy pushes on (< 0: it uncovers).
 
     ``reading``: the ``PerceivedCount`` whose features follow ``FEATURES`` (None: the shipped features alone);
-    ``reading_source``: what its file records of it (perception path and SHA-256, the tokens' classes)."""
+    its file records the reading's perception path and SHA-256 and its tokens' classes (``reading_source``)."""
 
     def __init__(self, num_features: int = len(FEATURES), hidden: int = 32):
         super().__init__()
         self.hidden = int(hidden)
         self.reading: PerceivedCount | None = None
-        self.reading_source: dict | None = None
         self.register_buffer("mean", torch.zeros(num_features))
         self.register_buffer("std", torch.ones(num_features))
         self.mlp = nn.Sequential(nn.Linear(num_features, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh(),
@@ -110,7 +109,15 @@ class StopCritic(nn.Module):
 
     @property
     def feature_names(self) -> list[str]:
-        return [*FEATURES, *(READING if self.reading_source is not None else ())]
+        return [*FEATURES, *(READING if self.reading is not None else ())]
+
+    @property
+    def reading_source(self) -> dict | None:
+        """What the file records of ``reading`` to rebuild it: the perception's path and SHA-256, the tokens' classes."""
+        if self.reading is None:
+            return None
+        return {"perception": self.reading.path, "sha256": self.reading.sha256,
+                "token_channel": self.reading.token_channel.detach().cpu().clone()}
 
     def read(self, net: PushQNet, td: TensorDictBase, max_pushes: int) -> torch.Tensor:
         """[*B, F]: ``stop_features``, then the perceived count when this critic reads it."""
@@ -147,7 +154,6 @@ class StopCritic(nn.Module):
         except (RuntimeError, KeyError) as error:
             raise ValueError(f"{path} holds mismatched weights ({error}); {HINT}") from error
         if source is not None:
-            critic.reading_source = dict(source)
             critic.reading = PerceivedCount.from_file(source["perception"], source["token_channel"], source["sha256"])
         return critic.eval(), dict(blob.get("meta", {}))
 

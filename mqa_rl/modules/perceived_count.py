@@ -41,12 +41,11 @@ def token_channels(dataset) -> torch.Tensor:
     for token, classes in named.items():
         if len(classes) == 1:
             table[token] = 1 + dataset.classes.index(next(iter(classes)))
-    missing = set(range(1, len(dataset.classes) + 1)) - set(table.tolist())
-    asked = {q.classes[0] for q in dataset.questions if len(q.classes) == 1}
-    missing = [c for c in missing if dataset.classes[c - 1] in asked]
+    asked = set().union(*named.values())
+    missing = sorted(asked - {dataset.classes[c - 1] for c in table.unique().tolist() if c > 0})
     if missing:
-        raise ValueError(f"no question token names class(es) {[dataset.classes[c - 1] for c in missing]} alone: the "
-                         f"questions of {dataset.root} cannot tell the asked class")
+        raise ValueError(f"no question token names class(es) {missing} alone: the questions of {dataset.root} cannot "
+                         f"tell the asked class")
     return table
 
 
@@ -56,21 +55,25 @@ def file_sha256(path: str | Path) -> str:
 
 class PerceivedCount(nn.Module):
     """(frames uint8 [B, 3, S, S], question tokens [B, L]) → [B, len(READING)]: the asked class's count, its largest
-    vote-cluster masses, log area and expected count, and the image-wide expected count / 50."""
+    vote-cluster masses, log area and expected count, and the image-wide expected count / 50. ``path`` and
+    ``sha256``: the perception's file, when it came from one (what a stop critic's file records)."""
 
-    def __init__(self, perception: CountingPerception, token_channel: torch.Tensor):
+    def __init__(self, perception: CountingPerception, token_channel: torch.Tensor, path: str | None = None,
+                 sha256: str | None = None):
         super().__init__()
         self.perception = perception.eval()
         self.register_buffer("token_channel", token_channel.to(torch.int64))
+        self.path, self.sha256 = path, sha256
 
     @classmethod
     def from_file(cls, path: str | Path, token_channel: torch.Tensor, sha256: str | None = None) -> "PerceivedCount":
         """The perception at ``path``; ValueError when ``sha256`` is given and the file is another one."""
-        if sha256 is not None and Path(path).is_file() and file_sha256(path) != sha256:
+        model, _ = load_perception(path)
+        found = file_sha256(path)
+        if sha256 is not None and found != sha256:
             raise ValueError(f"{path} is not the perception this stop was fitted with (its SHA-256 differs): restore "
                              f"that file or refit the stop with recipes/fit_stop.py perception={path}")
-        model, _ = load_perception(path)
-        return cls(model, token_channel)
+        return cls(model, token_channel, str(path), found)
 
     @property
     def input_size(self) -> int:

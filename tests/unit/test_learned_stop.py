@@ -203,7 +203,8 @@ def test_a_critic_reading_the_perception_round_trips_and_refuses_another_percept
     reading, path = _reading(tmp_path)
     width = len(FEATURES) + len(READING)
     critic = StopCritic(width)
-    critic.reading_source = {"perception": str(path), "sha256": file_sha256(path), "token_channel": reading.token_channel}
+    critic.reading = reading
+    assert critic.reading_source["sha256"] == file_sha256(path)
     saved = critic.save(tmp_path / "stop" / "stop_critic.pt", {"policy_fingerprint": policy_fingerprint(net)})
     loaded, _ = StopCritic.load(saved)
     assert loaded.feature_names == [*FEATURES, *READING] and loaded.reading is not None
