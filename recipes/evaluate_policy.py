@@ -33,11 +33,12 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 
 from mqa_rl.collectors.ray_pool import check_backend
+from mqa_rl.data.dataset import MQADataset
 from mqa_rl.envs.video import write_video
 from mqa_rl.evaluation.episode_metrics import mean_ci95, scene_bootstrap_ci95
 from mqa_rl.evaluation.policy_units import POLICIES, close_envs, run_units
 from mqa_rl.files import load_tensors, write_atomic
-from mqa_rl.modules.learned_stop import stop_env_kwargs
+from mqa_rl.modules.kept_frame import reading_env_options
 from mqa_rl.modules.trained_policy import read_run_config
 from mqa_rl.transforms.push_memory import memory_radius
 
@@ -118,8 +119,12 @@ def main(cfg: DictConfig) -> None:
              "threshold": float(reward.get("simple_threshold", 0.2)), "run": str(cfg.run) if cfg.run else None,
              "checkpoint": cfg.checkpoint, "stop_margin": cfg.stop_margin, "stop_critic": cfg.stop_critic,
              "video_episodes": int(cfg.video_episodes),
-             # a stop reading the counting perception: its frames in every observation (every policy's env alike)
-             "frames": stop_env_kwargs(cfg.stop_critic, int(run_cfg.env.get("image_size", 224)) if run_cfg else 224)}
+             "kept_frame": cfg.kept_frame,
+             # a stop or a kept frame reading the counting perception: its frames in every observation (every policy's env alike)
+             "frames": reading_env_options({"stop_critic": cfg.stop_critic, "kept_frame": cfg.kept_frame},
+                                           {"image_size": int(run_cfg.env.get("image_size", 224)) if run_cfg else 224},
+                                           MQADataset(dataset))}
+    reported = (*REPORTED, "counter_kept") if cfg.kept_frame else REPORTED
     metrics: dict = {}
     units = []
     metas = {level: episodes_meta(cfg, dataset, level, qtypes, max_pushes, reward, push_memory) for level in cfg.difficulties}
@@ -141,18 +146,18 @@ def main(cfg: DictConfig) -> None:
     for level in cfg.difficulties:
         per_policy = {name: metrics[level, name] for name in cfg.policies}
         for name, m in per_policy.items():
-            results.setdefault(level, {})[name] = {k: statistics(m.get(k, nan), m.get("scene")) for k in REPORTED}
-            print(f"{level:>6} {name:>13}: " + ", ".join(f"{k} {shown(results[level][name][k], sep='±')}" for k in REPORTED),
+            results.setdefault(level, {})[name] = {k: statistics(m.get(k, nan), m.get("scene")) for k in reported}
+            print(f"{level:>6} {name:>13}: " + ", ".join(f"{k} {shown(results[level][name][k], sep='±')}" for k in reported),
                   flush=True)
         if "greedy" in per_policy:
             for base in (p for p in per_policy if p != "greedy"):     # paired by question: the same episodes' scenes
                 diff = {k: statistics(per_policy["greedy"][k] - per_policy[base].get(k, nan), per_policy["greedy"].get("scene"))
-                        for k in REPORTED}
+                        for k in reported}
                 results[level][f"greedy-{base}"] = diff
     for level, rows in results.items():
-        lines.append(f"\n### {level}\n\n| policy | " + " | ".join(REPORTED) + " |\n|---|" + "---|" * len(REPORTED))
+        lines.append(f"\n### {level}\n\n| policy | " + " | ".join(reported) + " |\n|---|" + "---|" * len(reported))
         for name, row in rows.items():
-            lines.append(f"| {name} | " + " | ".join(f"{shown(row[k])} (n={row[k]['n']})" for k in REPORTED) + " |")
+            lines.append(f"| {name} | " + " | ".join(f"{shown(row[k])} (n={row[k]['n']})" for k in reported) + " |")
     for name, text in (("results.json", json.dumps(results, indent=2)), ("results.md", "\n".join(lines) + "\n"),
                        ("config.yaml", OmegaConf.to_yaml(cfg, resolve=True))):   # what these figures were measured with
         write_atomic(out / name, text)

@@ -41,7 +41,7 @@ from mqa_rl.collectors.ray_pool import RayPool, check_backend, ray_session
 from mqa_rl.collectors.store import EpisodeStore
 from mqa_rl.envs.sapien_bin import SapienBinEnv
 from mqa_rl.modules.frozen_policies import is_deterministic, make_frozen_policy, resolve_checkpoint
-from mqa_rl.modules.learned_stop import stop_env_kwargs
+from mqa_rl.modules.kept_frame import FrameKeeper, reading_env_options
 from mqa_rl.transforms.episode_stats import mean_target_chi
 from mqa_rl.transforms.mqa_env import make_mqa_env
 
@@ -112,21 +112,30 @@ def _answer_frame(env, td) -> torch.Tensor | None:
 
 def run_question_episode(env: SapienBinEnv, policy, exploration, question_index: int, *, max_pushes: int,
                          slot: int = 0, repeat: int = 0, seed: int = 0, store_depth: bool = True,
-                         store_object_map: bool = True) -> TensorDict:
-    """One episode of ``policy`` on a question (by index into the env's dataset) → its record."""
+                         store_object_map: bool = True, keeper: FrameKeeper | None = None) -> TensorDict:
+    """One episode of ``policy`` on a question (by index into the env's dataset) → its record. ``keeper``: I_stop is
+    the frame it keeps (its state's measurements with it), not the last; ``pushes`` stays the episode's."""
     question = env.dataset.questions[question_index]
     torch.manual_seed(episode_seed(seed, slot))
     td = env.reset(question_id=question.id)
-    first_map = object_map(env) if store_object_map else None
+    maps = [object_map(env)] if store_object_map else None
     first_answer = _answer_frame(env, td)
+    # a kept frame may be any state's: its object map is taken while the env stands there (not after the last step)
+    each_step = (lambda e, _: maps.append(object_map(e))) if keeper is not None and maps is not None else None
     with torch.no_grad(), set_exploration_type(exploration):
-        traj = env.rollout(max_pushes + 1, policy, auto_reset=False, tensordict=td, break_when_any_done=True)
+        traj = env.rollout(max_pushes + 1, policy, auto_reset=False, tensordict=td, break_when_any_done=True,
+                           callback=each_step)
     if not bool(traj["next", "done"][-1].item()):
         raise RuntimeError(f"episode of {question.id} did not end within {max_pushes + 1} steps: is the env's "
                            f"max_pushes larger than {max_pushes}?")
     first, last = traj[0], traj["next"][-1]
-    last_map = object_map(env) if store_object_map else None
-    last_answer = _answer_frame(env, last)
+    if maps is not None:
+        maps.append(object_map(env))
+    states = [first, *traj["next"].unbind(0)]
+    kept = keeper.choose(states) if keeper is not None else len(states) - 1
+    first_map, last_map = (maps[0], maps[-1 if keeper is None else kept]) if maps is not None else (None, None)
+    last_answer = _answer_frame(env, last) if kept == len(states) - 1 else states[kept].get(keys.ANSWER_RGB, None)
+    kept_state = states[kept]
     scene = env.dataset.scene(question.scene_id)
     scalar = lambda v, dtype=torch.int64: torch.as_tensor(v, dtype=dtype).reshape(())   # noqa: E731
     return TensorDict({
@@ -139,9 +148,9 @@ def run_question_episode(env: SapienBinEnv, policy, exploration, question_index:
         keys.PUSHES: scalar(last.get(keys.PUSH_COUNT)),
         keys.STOPPED: scalar(last.get(keys.IS_STOP), torch.bool),
         keys.EPISODE_TARGETS: first.get(keys.TARGET_MASK),
-        keys.CHI_START: _chi(first), keys.CHI_END: _chi(last),
+        keys.CHI_START: _chi(first), keys.CHI_END: _chi(kept_state),
         keys.FIRST: _frame(first, store_depth, first_map, first_answer),
-        keys.LAST: _frame(last, store_depth, last_map, last_answer),
+        keys.LAST: _frame(kept_state, store_depth, last_map, last_answer),
     }, batch_size=[])
 
 
@@ -152,7 +161,8 @@ _WORKER: dict = {}
 def _build(dataset_root: str, env_kwargs: dict, spec: dict, run: dict) -> dict:
     env = make_mqa_env(dataset_root, split=None, push_memory=spec.get("push_memory"), **env_kwargs)   # resolved spec
     policy, exploration = make_frozen_policy(spec, env, env_kwargs["max_pushes"])
-    return dict(env=env, policy=policy, exploration=exploration, run=run)
+    keeper = FrameKeeper.from_file(spec["kept_frame"], env.dataset) if spec.get("kept_frame") else None
+    return dict(env=env, policy=policy, exploration=exploration, run={**run, "keeper": keeper})
 
 
 def _episode(state: dict, task: tuple[int, int, int]) -> TensorDict:
@@ -222,12 +232,7 @@ def collect_rollouts(out_dir, *, dataset, policy, split: str, question_types=("c
     env_kwargs = {"max_pushes": int(max_pushes), "image_size": int(image_size), "pusher": pusher}
     if answer_size is not None and int(answer_size) != int(image_size):     # absent otherwise: older stores stay resumable
         env_kwargs["answer_size"] = int(answer_size)
-    frames = stop_env_kwargs(spec.get("stop_critic"), image_size)           # a stop reading the counting perception
-    if frames and env_kwargs.get("answer_size", frames["answer_size"]) != frames["answer_size"]:
-        raise ValueError(f"the policy's stop reads the counting perception on {frames['answer_size']}-px frames and the "
-                         f"env's answer camera renders {answer_size} px: set collection.env.answer_size="
-                         f"{frames['answer_size']}")
-    env_kwargs.update(frames)
+    env_kwargs.update(reading_env_options(spec, env_kwargs, ds))     # the counting perception's readers' frames
     run = {"max_pushes": int(max_pushes), "seed": int(seed), "store_depth": bool(store_depth),
            "store_object_map": bool(store_object_map)}
     meta = {"schema": SCHEMA, "kind": "rollouts",

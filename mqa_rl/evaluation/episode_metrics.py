@@ -76,6 +76,15 @@ def episode_metrics(final: TensorDictBase, simple_threshold: float = 0.2) -> dic
     return out
 
 
+def counter_on(state: TensorDictBase) -> torch.Tensor:
+    """[E]: 1 when a perfect counter reads the COUNTING answer from ``state``'s frame (e.g. a kept frame), NaN for
+    the other question types."""
+    tmask = state.get(keys.TARGET_MASK)
+    counting = state.get(keys.QUESTION_TYPE).reshape(tmask.shape[:-1]) == COUNTING
+    right = (targets_in_view(state).sum(-1) == tmask.sum(-1)).to(torch.float32)
+    return torch.where(counting, right, torch.full_like(right, math.nan))
+
+
 IDLE_MOVE_M = 0.005          # a push that moves no object by this much (5 mm) moved nothing
 
 

@@ -15,6 +15,7 @@ from mqa_rl.collectors.ray_pool import RayPool, ray_session
 from mqa_rl.envs.qmap_overlay import qmap_episode_frames
 from mqa_rl.evaluation.rollouts import run_episodes
 from mqa_rl.modules.frozen_policies import make_frozen_policy
+from mqa_rl.modules.kept_frame import FrameKeeper
 from mqa_rl.modules.learned_stop import LearnedStop
 from mqa_rl.modules.random_policy import RandomMQAPolicy
 from mqa_rl.modules.stop_margin import StopMargin
@@ -77,8 +78,9 @@ def evaluate_unit(setup: dict, level: str, name: str) -> tuple[dict, list]:
         policy, _ = make_frozen_policy(ORACLES.get(name, NO_MANIPULATION), env.base_env, max_pushes)
     else:
         raise ValueError(f"unknown policy {name!r}; choose among {', '.join(POLICIES)}")
+    keeper = FrameKeeper.from_file(setup["kept_frame"], env.base_env.dataset) if setup.get("kept_frame") else None
     metrics = run_episodes(env, policy, setup["episodes"], max_pushes=max_pushes, simple_threshold=setup["threshold"],
-                           on_episode=on_episode)
+                           on_episode=on_episode, keeper=keeper)
     return metrics, videos
 
 

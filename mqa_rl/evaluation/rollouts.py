@@ -8,19 +8,20 @@ import torch
 from tensordict import TensorDictBase
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
-from mqa_rl.evaluation.episode_metrics import FINAL_KEYS, episode_metrics, idle_pushes
+from mqa_rl.evaluation.episode_metrics import FINAL_KEYS, counter_on, episode_metrics, idle_pushes
 
 
 def run_episodes(env, policy, episodes: int, *, max_pushes: int, simple_threshold: float = 0.2,
-                 on_episode: Callable[[int, TensorDictBase], None] | None = None) -> dict[str, torch.Tensor]:
+                 on_episode: Callable[[int, TensorDictBase], None] | None = None, keeper=None) -> dict[str, torch.Tensor]:
     """``episodes`` rollouts (each to its end) under the policy's deterministic mode; metrics [episodes],
     with ``scene``: each episode's pile (its index in the dataset's scenes), for intervals by scene, and
     ``idle_pushes``: its pushes that moved nothing.
 
+    ``keeper`` (a ``FrameKeeper``): also ``counter_kept``, the perfect counter on the frame it keeps of each episode.
     ``on_episode(i, rollout)`` sees each rollout (e.g. to write a video). Seed the env beforehand for
     the same questions every time.
     """
-    finals, scenes, idle = [], [], []
+    finals, scenes, idle, kept = [], [], [], []
     scene_index = {s.id: i for i, s in enumerate(env.base_env.dataset.scenes)}
     with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
         for i in range(episodes):
@@ -31,7 +32,11 @@ def run_episodes(env, policy, episodes: int, *, max_pushes: int, simple_threshol
             finals.append(rollout["next"][-1].select(*FINAL_KEYS, strict=False))
             scenes.append(scene_index[env.base_env.question.scene_id])
             idle.append(idle_pushes(rollout))
+            if keeper is not None:
+                states = [rollout[0], *rollout["next"].unbind(0)]
+                kept.append(counter_on(states[keeper.choose(states)]))
             if on_episode is not None:
                 on_episode(i, rollout)
-    return {**episode_metrics(torch.stack(finals), simple_threshold), "scene": torch.tensor(scenes, dtype=torch.int64),
-            "idle_pushes": torch.stack(idle)}
+    out = {**episode_metrics(torch.stack(finals), simple_threshold), "scene": torch.tensor(scenes, dtype=torch.int64),
+           "idle_pushes": torch.stack(idle)}
+    return {**out, "counter_kept": torch.stack(kept)} if keeper is not None else out

@@ -12,6 +12,9 @@ mapping), frozen: nothing here learns.
                                             in an env with PushMemory(r), as it was trained (``make_mqa_env(push_memory=r)``)
     {kind: privileged, lookahead: 1}        the oracle reference (reads the simulator; see privileged_policy;
                                             order: visible_first, geometry: visible = the image teacher)
+    any kind, kept_frame: <perception.pt>   I_stop is the frame of the episode where that counting perception reads
+                                            the most of the asked class, not the last (``kept_frame.FrameKeeper``;
+                                            the rollout collector applies it)
 
 ``make_frozen_policy(spec, env)`` returns ``(policy, exploration_type)``: ``policy(td)`` writes
 ``action``; run it under ``set_exploration_type(exploration_type)``. ``is_deterministic(spec)``:
@@ -59,8 +62,11 @@ def check_spec(spec: Mapping) -> dict:
         if spec.get("push_memory") is not None and not isinstance(spec["push_memory"], int):
             raise ValueError(f"dqn push_memory={spec['push_memory']!r} must be an integer radius in grid cells "
                              f"(negative: no memory) or null (the run's env.push_memory)")
+    if spec.get("kept_frame") is not None and not isinstance(spec["kept_frame"], str):
+        raise ValueError(f"kept_frame={spec['kept_frame']!r} must be the path of a counting perception file "
+                         f"(e.g. checkpoints/vqa_counting/perception.pt) or null")
     unknown = set(spec) - {"kind", "run", "checkpoint", "epsilon", "stop_margin", "stop_critic", "push_memory",
-                           *PRIVILEGED_OPTIONS}
+                           "kept_frame", *PRIVILEGED_OPTIONS}
     if unknown:
         raise ValueError(f"unknown policy option(s) {sorted(unknown)} for kind {kind!r}")
     return spec

@@ -259,3 +259,81 @@ def test_each_asked_class_has_a_token_that_names_it(small_dataset):
     tokens = torch.nn.utils.rnn.pad_sequence([torch.tensor(q.tokens) for q in single], batch_first=True)
     assert reading.asked_channel(tokens).tolist() == [1 + small_dataset.classes.index(q.classes[0]) for q in single]
     assert table[small_dataset.vocab.encode("how many are there in the bin ?")].eq(0).all()
+
+
+def test_a_kept_frame_is_the_episodes_state_the_perception_reads_most_in(small_dataset, tmp_path):
+    """``kept_frame``: I_stop is the state where the counting perception's expected count of the asked class is
+    highest (ties: the later), with that state's measurements (its object map counts its visible areas) and answer
+    frame; I_start and the pushes are the episode's, as without it. A missing file and a non-path are refused."""
+    from mqa_rl.modules.kept_frame import FrameKeeper
+    from mqa_rl.modules.perception import CountingPerception, save_perception
+    from mqa_rl.modules.perceived_count import READING
+    torch.manual_seed(0)
+    path = save_perception(CountingPerception(1 + len(small_dataset.classes), widths=(8, 8, 16, 16)),
+                           tmp_path / "perception.pt", {})
+    from mqa_rl.envs.sapien_bin import SapienBinEnv
+    run = tmp_path / "dqn_run"
+    _fake_dqn_run(run, SapienBinEnv(small_dataset, split="train"))
+    never_stop = {"kind": "dqn", "run": str(run), "stop_margin": 1e9}
+    plan = {**PLAN, "levels": ["hard"], "answer_size": 448, "store_depth": False, "max_pushes": 3, "policy": never_stop}
+    plain, kept = tmp_path / "plain", tmp_path / "kept"
+    collect_rollouts(plain, dataset=small_dataset, **plan)
+    collect_rollouts(kept, dataset=small_dataset, **{**plan, "policy": {**never_stop, "kept_frame": str(path)}})
+    a, b = load_records(plain), load_records(kept)
+    assert torch.equal(a[keys.FIRST_RGB], b[keys.FIRST_RGB]) and torch.equal(a[keys.PUSHES], b[keys.PUSHES])
+    assert (a[keys.PUSHES] == 3).all()
+    assert not torch.equal(a[keys.LAST_RGB], b[keys.LAST_RGB])                          # not always the last frame
+    keeper = FrameKeeper.from_file(path, small_dataset)
+    expected = lambda rgb: keeper.reading(rgb, b[keys.QUESTION])[:, READING.index("perceived_expected")]  # noqa: E731
+    assert (expected(b[keys.LAST_RGB]) >= expected(b[keys.FIRST_RGB])).all()
+    assert (expected(b[keys.LAST_RGB]) >= expected(a[keys.LAST_RGB])).all()
+    last = b[keys.LAST]
+    counted = torch.stack([torch.bincount(m.flatten().long(), minlength=1 + v.shape[0])[1:1 + v.shape[0]]
+                           for m, v in zip(last[keys.OBJECT_MAP], last[keys.FRAME_VISIBLE])])
+    assert torch.equal(counted.float(), last[keys.FRAME_VISIBLE].float())          # one state's measurements
+    pooled = torch.nn.functional.avg_pool2d(last[keys.ANSWER_RGB].float(), 2)
+    assert (pooled - last[keys.RGB].float()).abs().mean() < 3.0                        # and its answer frame
+    with pytest.raises(FileNotFoundError, match="no such perception file"):
+        collect_rollouts(tmp_path / "x", dataset=small_dataset, **{**plan, "policy": {**never_stop, "kept_frame": "nope.pt"}})
+    with pytest.raises(ValueError, match="must be the path of a counting perception"):
+        collect_rollouts(tmp_path / "y", dataset=small_dataset, **{**plan, "policy": {**never_stop, "kept_frame": 3}})
+
+
+def test_the_frame_keeper_keeps_the_highest_reading_and_the_later_of_equals(small_dataset):
+    from mqa_rl.modules.kept_frame import FrameKeeper
+    from mqa_rl.modules.perceived_count import READING, PerceivedCount, token_channels
+    from mqa_rl.modules.perception import CountingPerception
+    torch.manual_seed(0)
+    keeper = FrameKeeper(PerceivedCount(CountingPerception(1 + len(small_dataset.classes), widths=(8, 8, 16, 16)),
+                                        token_channels(small_dataset)))
+    question = torch.tensor(small_dataset.questions[0].tokens)
+    frames = torch.randint(0, 256, (4, 3, 112, 112), dtype=torch.uint8)
+    states = [TensorDict({keys.RGB: f, keys.QUESTION: question}, []) for f in frames]
+    scores = keeper.reading(frames, question.expand(4, -1))[:, READING.index("perceived_expected")]
+    best = int(scores.argmax())
+    assert keeper.choose(states) == best
+    assert keeper.choose([*states, states[best].clone()]) == 4                      # a tie: the later frame
+    assert keeper.choose(states[:1]) == 0
+
+
+def test_evaluate_policy_reports_the_counter_on_the_frame_kept(small_dataset_dir, small_dataset, tmp_path, monkeypatch):
+    """``kept_frame=``: ``counter_kept`` is the perfect counter on the state the keeper chooses: I_start's
+    (``counter_start``) when it keeps the first, I_stop's (``counter_stop``) when it keeps the last."""
+    from mqa_rl.evaluation import policy_units
+    from mqa_rl.modules.kept_frame import FrameKeeper
+    from mqa_rl.modules.perception import CountingPerception, save_perception
+    path = save_perception(CountingPerception(1 + len(small_dataset.classes), widths=(8, 8, 16, 16)),
+                           tmp_path / "perception.pt", {})
+    setup = {"dataset": str(small_dataset_dir), "split": "train", "qtypes": ["counting"], "max_pushes": 3,
+             "pusher": "finger", "push_memory": None, "seed": 3, "episodes": 4, "threshold": 0.2, "frames": {},
+             "reward": OmegaConf.to_container(OmegaConf.load(REPO / "recipes" / "conf" / "reward" / "countable.yaml")),
+             "kept_frame": str(path)}
+    try:
+        for kept, same_as in ((0, "counter_start"), (-1, "counter_stop")):
+            monkeypatch.setattr(FrameKeeper, "choose", lambda self, states, k=kept: range(len(states))[k])
+            metrics, _ = policy_units.evaluate_unit(setup, "easy", "random_masked")
+            assert metrics["counter_kept"].isfinite().all()
+            assert torch.equal(metrics["counter_kept"], metrics[same_as]), same_as
+        assert not torch.equal(metrics["counter_start"], metrics["counter_stop"])     # the two frames tell apart here
+    finally:
+        policy_units.close_envs()

@@ -1,0 +1,69 @@
+"""FrameKeeper: which frame of an episode the answer reads as I_stop.
+
+The paper's VQA reads the first and the last image. A push can bury what an earlier push showed, and the robot has
+seen every frame on its way: the paper's future work asks it to "remember" what it did. The keeper chooses the frame
+where the counting perception reads the most of the asked class (its expected count; ties: the later frame), since a
+visible count only falls short of the answer when targets hide. It reads the frames the VQA reads (the answer
+camera's when the observation carries them), and the simulator's measurements of that state go with it, so a
+perfect counter on "I_stop" measures the kept frame.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from collections.abc import Mapping, Sequence
+
+import torch
+from tensordict import TensorDictBase
+
+from mqa_rl import keys
+from mqa_rl.modules.learned_stop import reading_env_kwargs, stop_env_kwargs
+from mqa_rl.modules.perceived_count import READING, PerceivedCount, token_channels
+
+EXPECTED = READING.index("perceived_expected")
+
+
+class FrameKeeper:
+    """``choose(states)`` → the index of the state whose frame the answer reads (0: I_start)."""
+
+    def __init__(self, reading: PerceivedCount):
+        self.reading = reading.eval()
+
+    @classmethod
+    def from_file(cls, path: str | Path, dataset) -> "FrameKeeper":
+        """The perception at ``path``, asked about ``dataset``'s classes (its questions name them)."""
+        if not Path(path).is_file():
+            raise FileNotFoundError(f"kept_frame={path}: no such perception file; give a counting perception "
+                                    f"(e.g. checkpoints/vqa_counting/perception.pt, or one of recipes/train_perception.py)")
+        return cls(PerceivedCount.from_file(path, token_channels(dataset)))
+
+    def env_kwargs(self, image_size: int) -> dict:
+        """The env options the keeper needs: its perception's frames in every observation."""
+        return reading_env_kwargs(self.reading, image_size)
+
+    @torch.no_grad()
+    def choose(self, states: Sequence[TensorDictBase]) -> int:
+        frames = torch.stack([self.reading.frames(s) for s in states])
+        question = states[0].get(keys.QUESTION)
+        expected = self.reading(frames, question.expand(len(states), *question.shape))[:, EXPECTED]
+        return max(i for i in range(len(states)) if expected[i] >= expected.max())
+
+
+def reading_env_options(spec: Mapping, env_kwargs: Mapping, dataset) -> dict:
+    """The env options (beside ``env_kwargs``: image_size, answer_size if any) that the counting perception's readers in
+    ``spec`` need (its ``stop_critic``, its ``kept_frame``): the answer camera at the perception's size in every
+    observation. ValueError when the env's answer camera renders another size."""
+    image_size = env_kwargs["image_size"]
+    keeper = FrameKeeper.from_file(spec["kept_frame"], dataset) if spec.get("kept_frame") else None
+    frames = {}
+    for who, needs in (("stop", stop_env_kwargs(spec.get("stop_critic"), image_size)),
+                       ("kept frame", keeper.env_kwargs(image_size) if keeper else {})):
+        size = needs.get("answer_size")
+        if size is not None and env_kwargs.get("answer_size", frames.get("answer_size", size)) != size:
+            raise ValueError(f"the policy's {who} reads the counting perception on {size}-px frames and the env's "
+                             f"answer camera renders {env_kwargs.get('answer_size', frames.get('answer_size'))} px: "
+                             f"set collection.env.answer_size={size}")
+        frames.update(needs)
+    if keeper is not None and env_kwargs.get("answer_size", frames.get("answer_size")) is not None:
+        frames["answer_observation"] = True       # the kept state's answer frame, whichever state it is
+    return frames
