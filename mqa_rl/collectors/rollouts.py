@@ -1,7 +1,8 @@
 """Rollouts of a frozen policy over a set of questions, stored for the VQA: per episode the question,
 its answer and type, scene and level, I_start and I_stop (rgb uint8, depth float16; with ``answer_size`` also the
 answer camera's finer rgb, which a VQA whose perception reads that size takes instead), the per-object
-measurements of both frames, pushes used and the targets' mean χ at start and end.
+measurements of both frames, pushes used and the targets' mean χ at start and end. A policy spec with
+``kept_frame`` stores as I_stop the state its ``FrameKeeper`` keeps (``mqa_rl.modules.kept_frame``), not the last.
 
     collect_rollouts("runs/answering/rollouts/counting/random/train", dataset="data/mqa",
                      policy={"kind": "random"}, split="train", question_types=["counting"], repeats=3)
