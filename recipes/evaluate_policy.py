@@ -123,7 +123,7 @@ def main(cfg: DictConfig) -> None:
              # a stop or a kept frame reading the counting perception: its frames in every observation (every policy's env alike)
              "frames": reading_env_options({"stop_critic": cfg.stop_critic, "kept_frame": cfg.kept_frame},
                                            {"image_size": int(run_cfg.env.get("image_size", 224)) if run_cfg else 224},
-                                           MQADataset(dataset))}
+                                           MQADataset(dataset) if cfg.kept_frame else None)}
     reported = (*REPORTED, "counter_kept") if cfg.kept_frame else REPORTED
     metrics: dict = {}
     units = []

@@ -68,7 +68,7 @@ def episode_metrics(final: TensorDictBase, simple_threshold: float = 0.2) -> dic
     counting = (qtype.squeeze(-1) == COUNTING) if qtype is not None else torch.zeros_like(has_target)
     targets = tmask.sum(-1)
     for name, seen in (("counter_start", start), ("counter_stop", end), ("counter_either", start | end)):
-        out[name] = torch.where(counting, (seen.sum(-1) == targets).to(torch.float32), nan)
+        out[name] = _counter_right(seen, targets, counting)
     terms = final.get(keys.EPISODE_TERMS, None)
     if terms is not None:
         for name in terms.keys():
@@ -76,13 +76,18 @@ def episode_metrics(final: TensorDictBase, simple_threshold: float = 0.2) -> dic
     return out
 
 
+def _counter_right(seen: torch.Tensor, targets: torch.Tensor, counting: torch.Tensor) -> torch.Tensor:
+    """1 where the targets a perfect counter sees are all the targets of a COUNTING question, NaN for other types."""
+    right = (seen.sum(-1) == targets).to(torch.float32)
+    return torch.where(counting, right, torch.full_like(right, math.nan))
+
+
 def counter_on(state: TensorDictBase) -> torch.Tensor:
     """[E]: 1 when a perfect counter reads the COUNTING answer from ``state``'s frame (e.g. a kept frame), NaN for
     the other question types."""
     tmask = state.get(keys.TARGET_MASK)
     counting = state.get(keys.QUESTION_TYPE).reshape(tmask.shape[:-1]) == COUNTING
-    right = (targets_in_view(state).sum(-1) == tmask.sum(-1)).to(torch.float32)
-    return torch.where(counting, right, torch.full_like(right, math.nan))
+    return _counter_right(targets_in_view(state), tmask.sum(-1), counting)
 
 
 IDLE_MOVE_M = 0.005          # a push that moves no object by this much (5 mm) moved nothing
