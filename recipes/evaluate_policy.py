@@ -124,7 +124,7 @@ def main(cfg: DictConfig) -> None:
              "frames": reading_env_options({"stop_critic": cfg.stop_critic, "kept_frame": cfg.kept_frame},
                                            {"image_size": int(run_cfg.env.get("image_size", 224)) if run_cfg else 224},
                                            MQADataset(dataset) if cfg.kept_frame else None)}
-    reported = (*REPORTED, "counter_kept") if cfg.kept_frame else REPORTED
+    reported = (*REPORTED, "counter_kept", "countable_gain_kept") if cfg.kept_frame else REPORTED
     metrics: dict = {}
     units = []
     metas = {level: episodes_meta(cfg, dataset, level, qtypes, max_pushes, reward, push_memory) for level in cfg.difficulties}

@@ -90,6 +90,12 @@ def counter_on(state: TensorDictBase) -> torch.Tensor:
     return _counter_right(targets_in_view(state), tmask.sum(-1), counting)
 
 
+def countable_gain_on(start: TensorDictBase, state: TensorDictBase) -> torch.Tensor:
+    """[E]: targets countable in ``state``'s frame (e.g. a kept frame) and not in ``start``'s, minus the reverse."""
+    before, after = targets_in_view(start), targets_in_view(state)
+    return ((after & ~before).sum(-1) - (before & ~after).sum(-1)).to(torch.float32)
+
+
 IDLE_MOVE_M = 0.005          # a push that moves no object by this much (5 mm) moved nothing
 
 
