@@ -44,6 +44,7 @@ from mqa_rl.transforms.push_memory import memory_radius
 
 REPORTED = ("reward", "pushes", "final_simple", "chi_end", "chi_change", "hidden_end", "into_view", "out_of_view",
             "countable_gain", "counter_stop", "counter_either", "idle_pushes", "stopped")
+KEPT_REPORTED = ("counter_kept", "countable_gain_kept", "chi_kept", "hidden_kept")     # with kept_frame=
 
 
 def episodes_meta(cfg: DictConfig, dataset, level: str, qtypes, max_pushes: int, reward: dict,
@@ -124,7 +125,7 @@ def main(cfg: DictConfig) -> None:
              "frames": reading_env_options({"stop_critic": cfg.stop_critic, "kept_frame": cfg.kept_frame},
                                            {"image_size": int(run_cfg.env.get("image_size", 224)) if run_cfg else 224},
                                            MQADataset(dataset) if cfg.kept_frame else None)}
-    reported = (*REPORTED, "counter_kept", "countable_gain_kept") if cfg.kept_frame else REPORTED
+    reported = (*REPORTED, *KEPT_REPORTED) if cfg.kept_frame else REPORTED
     metrics: dict = {}
     units = []
     metas = {level: episodes_meta(cfg, dataset, level, qtypes, max_pushes, reward, push_memory) for level in cfg.difficulties}

@@ -46,7 +46,7 @@ def episode_metrics(final: TensorDictBase, simple_threshold: float = 0.2) -> dic
     nan = torch.full(has_target.shape, math.nan)
     chi_start = final.get(keys.TARGET_CHI_START).squeeze(-1)
     chi_end = mean_target_chi(final).squeeze(-1)
-    hidden = ((final.get(keys.OVERLAP) >= FULLY_HIDDEN) & tmask).sum(-1) / tmask.sum(-1).clamp(min=1)
+    hidden = _hidden_fraction(final)
     out = {
         "reward": final.get(keys.EPISODE_REWARD).squeeze(-1),
         "pushes": final.get(keys.PUSH_COUNT).squeeze(-1).to(torch.float32),
@@ -55,7 +55,7 @@ def episode_metrics(final: TensorDictBase, simple_threshold: float = 0.2) -> dic
         "chi_start": torch.where(has_target, chi_start, nan),
         "chi_end": torch.where(has_target, chi_end, nan),
         "chi_change": torch.where(has_target, chi_end - chi_start, nan),
-        "hidden_end": torch.where(has_target, hidden.to(torch.float32), nan),
+        "hidden_end": torch.where(has_target, hidden, nan),
     }
     start, end, n = final.get(keys.TARGETS_IN_VIEW_START), targets_in_view(final), tmask.sum(-1).clamp(min=1)
     into, out_of = (end & ~start).sum(-1) / n, (start & ~end).sum(-1) / n
@@ -82,18 +82,26 @@ def _counter_right(seen: torch.Tensor, targets: torch.Tensor, counting: torch.Te
     return torch.where(counting, right, torch.full_like(right, math.nan))
 
 
-def counter_on(state: TensorDictBase) -> torch.Tensor:
-    """[E]: 1 when a perfect counter reads the COUNTING answer from ``state``'s frame (e.g. a kept frame), NaN for
-    the other question types."""
+def kept_frame_metrics(start: TensorDictBase, state: TensorDictBase) -> dict[str, torch.Tensor]:
+    """[E] each: what ``state``'s frame (e.g. a kept frame, the I_stop of a system that answers from it) holds against
+    ``start``'s (I_start): ``counter_kept`` (the perfect counter reads the COUNTING answer from it; NaN for the other
+    question types), ``countable_gain_kept`` (targets countable in it and not at the start, minus the reverse),
+    ``chi_kept`` and ``hidden_kept`` (the targets' mean χ and fraction fully hidden in it; NaN without target)."""
     tmask = state.get(keys.TARGET_MASK)
     counting = state.get(keys.QUESTION_TYPE).reshape(tmask.shape[:-1]) == COUNTING
-    return _counter_right(targets_in_view(state), tmask.sum(-1), counting)
-
-
-def countable_gain_on(start: TensorDictBase, state: TensorDictBase) -> torch.Tensor:
-    """[E]: targets countable in ``state``'s frame (e.g. a kept frame) and not in ``start``'s, minus the reverse."""
     before, after = targets_in_view(start), targets_in_view(state)
-    return ((after & ~before).sum(-1) - (before & ~after).sum(-1)).to(torch.float32)
+    has_target = tmask.any(-1)
+    nan = torch.full(has_target.shape, math.nan)
+    return {"counter_kept": _counter_right(after, tmask.sum(-1), counting),
+            "countable_gain_kept": ((after & ~before).sum(-1) - (before & ~after).sum(-1)).to(torch.float32),
+            "chi_kept": torch.where(has_target, mean_target_chi(state).squeeze(-1), nan),
+            "hidden_kept": torch.where(has_target, _hidden_fraction(state), nan)}
+
+
+def _hidden_fraction(td: TensorDictBase) -> torch.Tensor:
+    """[E] the fraction of the question's targets fully hidden (χ = 1) in ``td``'s frame (0 without target)."""
+    tmask = td.get(keys.TARGET_MASK)
+    return (((td.get(keys.OVERLAP) >= FULLY_HIDDEN) & tmask).sum(-1) / tmask.sum(-1).clamp(min=1)).to(torch.float32)
 
 
 IDLE_MOVE_M = 0.005          # a push that moves no object by this much (5 mm) moved nothing

@@ -8,7 +8,7 @@ import torch
 from tensordict import TensorDictBase
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
-from mqa_rl.evaluation.episode_metrics import FINAL_KEYS, countable_gain_on, counter_on, episode_metrics, idle_pushes
+from mqa_rl.evaluation.episode_metrics import FINAL_KEYS, episode_metrics, idle_pushes, kept_frame_metrics
 
 
 def run_episodes(env, policy, episodes: int, *, max_pushes: int, simple_threshold: float = 0.2,
@@ -17,12 +17,12 @@ def run_episodes(env, policy, episodes: int, *, max_pushes: int, simple_threshol
     with ``scene``: each episode's pile (its index in the dataset's scenes), for intervals by scene, and
     ``idle_pushes``: its pushes that moved nothing.
 
-    ``keeper`` (a ``FrameKeeper``): also ``counter_kept`` and ``countable_gain_kept``, the perfect counter and the
-    net targets made countable on the frame it keeps of each episode (what that system answers from).
+    ``keeper`` (a ``FrameKeeper``): also what the frame it keeps of each episode holds (the I_stop of a system that
+    answers from it): ``counter_kept``, ``countable_gain_kept``, ``chi_kept``, ``hidden_kept`` (``kept_frame_metrics``).
     ``on_episode(i, rollout)`` sees each rollout (e.g. to write a video). Seed the env beforehand for
     the same questions every time.
     """
-    finals, scenes, idle, kept, kept_gain = [], [], [], [], []
+    finals, scenes, idle, kept = [], [], [], []
     scene_index = {s.id: i for i, s in enumerate(env.base_env.dataset.scenes)}
     with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
         for i in range(episodes):
@@ -35,13 +35,11 @@ def run_episodes(env, policy, episodes: int, *, max_pushes: int, simple_threshol
             idle.append(idle_pushes(rollout))
             if keeper is not None:
                 states = [rollout[0], *rollout["next"].unbind(0)]
-                chosen = states[keeper.choose(states)]
-                kept.append(counter_on(chosen))
-                kept_gain.append(countable_gain_on(states[0], chosen))
+                kept.append(kept_frame_metrics(states[0], states[keeper.choose(states)]))
             if on_episode is not None:
                 on_episode(i, rollout)
     out = {**episode_metrics(torch.stack(finals), simple_threshold), "scene": torch.tensor(scenes, dtype=torch.int64),
            "idle_pushes": torch.stack(idle)}
     if keeper is None:
         return out
-    return {**out, "counter_kept": torch.stack(kept), "countable_gain_kept": torch.stack(kept_gain)}
+    return {**out, **{k: torch.stack([m[k] for m in kept]) for k in kept[0]}}

@@ -319,7 +319,8 @@ def test_the_frame_keeper_keeps_the_highest_reading_and_the_later_of_equals(smal
 def test_evaluate_policy_reports_the_counter_on_the_frame_kept(small_dataset_dir, small_dataset, tmp_path, monkeypatch):
     """``kept_frame=``: ``counter_kept`` is the perfect counter on the state the keeper chooses: I_start's
     (``counter_start``) when it keeps the first, I_stop's (``counter_stop``) when it keeps the last; likewise
-    ``countable_gain_kept``: nothing gained on the first frame, the episode's ``countable_gain`` on the last."""
+    ``countable_gain_kept``: nothing gained on the first frame, the episode's ``countable_gain`` on the last; and
+    ``chi_kept`` / ``hidden_kept``: the start's χ on the first frame, ``chi_end`` / ``hidden_end`` on the last."""
     from mqa_rl.evaluation import policy_units
     from mqa_rl.modules.kept_frame import FrameKeeper
     from mqa_rl.modules.perception import CountingPerception, save_perception
@@ -337,6 +338,10 @@ def test_evaluate_policy_reports_the_counter_on_the_frame_kept(small_dataset_dir
             assert torch.equal(metrics["counter_kept"], metrics[same_as]), same_as
             gain = torch.zeros_like(metrics["countable_gain"]) if kept == 0 else metrics["countable_gain"]
             assert torch.equal(metrics["countable_gain_kept"], gain)
+            chi = metrics["chi_start"] if kept == 0 else metrics["chi_end"]
+            assert torch.allclose(metrics["chi_kept"], chi, equal_nan=True)
+            if kept == -1:
+                assert torch.equal(metrics["hidden_kept"].nan_to_num(-1), metrics["hidden_end"].nan_to_num(-1))
         assert metrics["countable_gain"].abs().sum() > 0                               # the last frame gained or lost
         assert not torch.equal(metrics["counter_start"], metrics["counter_stop"])     # the two frames tell apart here
     finally:
