@@ -50,6 +50,7 @@ BETA = (REWARD_TERMS, "beta")                          # β used for this step
 ACTION_VALUE = "action_value"                 # float32 [NUM_ACTIONS] Q(s, ·), masked actions at the dtype's min
 CHOSEN_ACTION_VALUE = "chosen_action_value"   # float32 [1] Q(s, a) of the chosen action
 TD_ERROR = "td_error"                         # float32 [1] squared TD error, the replay priority
+PERCEIVED_READING = "perceived_reading"       # float32 [len(READING)] a perceiving stop's reading of the state's frame
 
 # running episode statistics (mqa_rl.transforms.episode_stats), observations read at episode ends
 EPISODE = "episode"

@@ -42,7 +42,7 @@ from mqa_rl.collectors.ray_pool import RayPool, check_backend, ray_session
 from mqa_rl.collectors.store import EpisodeStore
 from mqa_rl.envs.sapien_bin import SapienBinEnv
 from mqa_rl.modules.frozen_policies import is_deterministic, make_frozen_policy, resolve_checkpoint
-from mqa_rl.modules.kept_frame import FrameKeeper, reading_env_options
+from mqa_rl.modules.kept_frame import FrameKeeper, episode_states, reading_env_options
 from mqa_rl.transforms.episode_stats import mean_target_chi
 from mqa_rl.transforms.mqa_env import make_mqa_env
 
@@ -132,7 +132,7 @@ def run_question_episode(env: SapienBinEnv, policy, exploration, question_index:
     first, last = traj[0], traj["next"][-1]
     if maps is not None:
         maps.append(object_map(env))
-    states = [first, *traj["next"].unbind(0)]
+    states = episode_states(traj)
     kept = keeper.choose(states) if keeper is not None else len(states) - 1
     first_map, last_map = (maps[0], maps[-1 if keeper is None else kept]) if maps is not None else (None, None)
     last_answer = _answer_frame(env, last) if kept == len(states) - 1 else states[kept].get(keys.ANSWER_RGB, None)
@@ -162,7 +162,7 @@ _WORKER: dict = {}
 def _build(dataset_root: str, env_kwargs: dict, spec: dict, run: dict) -> dict:
     env = make_mqa_env(dataset_root, split=None, push_memory=spec.get("push_memory"), **env_kwargs)   # resolved spec
     policy, exploration = make_frozen_policy(spec, env, env_kwargs["max_pushes"])
-    keeper = FrameKeeper.from_file(spec["kept_frame"], env.dataset) if spec.get("kept_frame") else None
+    keeper = FrameKeeper.from_file(spec["kept_frame"], env.dataset, policy) if spec.get("kept_frame") else None
     return dict(env=env, policy=policy, exploration=exploration, run={**run, "keeper": keeper})
 
 

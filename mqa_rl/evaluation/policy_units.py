@@ -78,7 +78,7 @@ def evaluate_unit(setup: dict, level: str, name: str) -> tuple[dict, list]:
         policy, _ = make_frozen_policy(ORACLES.get(name, NO_MANIPULATION), env.base_env, max_pushes)
     else:
         raise ValueError(f"unknown policy {name!r}; choose among {', '.join(POLICIES)}")
-    keeper = FrameKeeper.from_file(setup["kept_frame"], env.base_env.dataset) if setup.get("kept_frame") else None
+    keeper = FrameKeeper.from_file(setup["kept_frame"], env.base_env.dataset, policy) if setup.get("kept_frame") else None
     metrics = run_episodes(env, policy, setup["episodes"], max_pushes=max_pushes, simple_threshold=setup["threshold"],
                            on_episode=on_episode, keeper=keeper)
     return metrics, videos

@@ -9,6 +9,7 @@ from tensordict import TensorDictBase
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 from mqa_rl.evaluation.episode_metrics import FINAL_KEYS, episode_metrics, idle_pushes, kept_frame_metrics
+from mqa_rl.modules.kept_frame import episode_states
 
 
 def run_episodes(env, policy, episodes: int, *, max_pushes: int, simple_threshold: float = 0.2,
@@ -34,7 +35,7 @@ def run_episodes(env, policy, episodes: int, *, max_pushes: int, simple_threshol
             scenes.append(scene_index[env.base_env.question.scene_id])
             idle.append(idle_pushes(rollout))
             if keeper is not None:
-                states = [rollout[0], *rollout["next"].unbind(0)]
+                states = episode_states(rollout)
                 kept.append(kept_frame_metrics(states[0], states[keeper.choose(states)]))
             if on_episode is not None:
                 on_episode(i, rollout)

@@ -5,7 +5,8 @@ seen every frame on its way: the paper's future work asks it to "remember" what 
 where the counting perception reads the most of the asked class (its expected count; ties: the later frame), since a
 visible count only falls short of the answer when targets hide. It reads the frames the VQA reads (the answer
 camera's when the observation carries them), and the simulator's measurements of that state go with it, so a
-perfect counter on "I_stop" measures the kept frame.
+perfect counter on "I_stop" measures the kept frame. Behind a perceiving stop of the same perception file the keeper
+reuses the readings the stop left in the states (``keys.PERCEIVED_READING``) and reads only the last frame itself.
 """
 
 from __future__ import annotations
@@ -26,16 +27,21 @@ EXPECTED = READING.index("perceived_expected")
 class FrameKeeper:
     """``choose(states)`` → the index of the state whose frame the answer reads (0: I_start)."""
 
-    def __init__(self, reading: PerceivedCount):
+    def __init__(self, reading: PerceivedCount, policy=None):
+        """``policy``: the policy whose episodes it keeps a frame of; when its learned stop reads the same perception
+        file (SHA-256) and classes, the keeper reuses that stop's readings (``self.reuse``)."""
         self.reading = reading.eval()
+        stops = getattr(getattr(policy, "critic", None), "reading", None)
+        self.reuse = (stops is not None and stops.sha256 is not None and stops.sha256 == reading.sha256
+                      and torch.equal(stops.token_channel.cpu(), reading.token_channel.cpu()))
 
     @classmethod
-    def from_file(cls, path: str | Path, dataset) -> "FrameKeeper":
+    def from_file(cls, path: str | Path, dataset, policy=None) -> "FrameKeeper":
         """The perception at ``path``, asked about ``dataset``'s classes (its questions name them)."""
         if not Path(path).is_file():
             raise FileNotFoundError(f"kept_frame={path}: no such perception file; give a counting perception "
                                     f"(e.g. checkpoints/vqa_counting/perception.pt, or one of recipes/train_perception.py)")
-        return cls(PerceivedCount.from_file(path, token_channels(dataset)))
+        return cls(PerceivedCount.from_file(path, token_channels(dataset)), policy)
 
     def env_kwargs(self, image_size: int) -> dict:
         """The env options the keeper needs: its perception's frames in every observation."""
@@ -43,10 +49,23 @@ class FrameKeeper:
 
     @torch.no_grad()
     def choose(self, states: Sequence[TensorDictBase]) -> int:
-        frames = torch.stack([self.reading.frames(s) for s in states])
-        question = states[0].get(keys.QUESTION)
-        expected = self.reading(frames, question.expand(len(states), *question.shape))[:, EXPECTED]
+        read = [self.reuse and keys.PERCEIVED_READING in s.keys() for s in states]
+        expected = torch.empty(len(states))
+        for i, s in enumerate(states):
+            if read[i]:
+                expected[i] = s.get(keys.PERCEIVED_READING)[EXPECTED]
+        todo = [i for i in range(len(states)) if not read[i]]
+        if todo:
+            frames = torch.stack([self.reading.frames(states[i]) for i in todo])
+            question = states[0].get(keys.QUESTION)
+            expected[todo] = self.reading(frames, question.expand(len(todo), *question.shape))[:, EXPECTED]
         return max(i for i in range(len(states)) if expected[i] >= expected.max())
+
+
+def episode_states(rollout: TensorDictBase) -> list[TensorDictBase]:
+    """The states of one episode's rollout [T], I_start first and the last ``next`` last: the roots, which carry what
+    the policy wrote (a perceiving stop's reading), then the state the last step led to."""
+    return [*rollout.unbind(0), rollout["next"][-1]]
 
 
 def reading_env_options(spec: Mapping, env_kwargs: Mapping, dataset) -> dict:

@@ -183,6 +183,8 @@ class LearnedStop(TensorDictModuleBase):
             raise ValueError(f"this stop critic was fitted for another policy's weights; {HINT}")
         self.in_keys = [*getattr(policy, "in_keys", []), keys.PUSH_COUNT]
         self.out_keys = list(getattr(policy, "out_keys", [keys.ACTION]))
+        if critic.reading is not None:          # its reading stays in the state (a FrameKeeper of that perception reuses it)
+            self.out_keys.append(keys.PERCEIVED_READING)
 
     @classmethod
     def from_file(cls, policy, path: str | Path, max_pushes: int, push_memory: int | None = None) -> "LearnedStop":
@@ -199,7 +201,10 @@ class LearnedStop(TensorDictModuleBase):
         q = tensordict.get(keys.ACTION_VALUE)
         _, best_push, any_push = best_allowed_push(q)
         with torch.no_grad():
-            gain = self.critic(self.critic.read(self.net, tensordict, self.max_pushes))
+            features = self.critic.read(self.net, tensordict, self.max_pushes)
+            gain = self.critic(features)
+        if self.critic.reading is not None:
+            tensordict.set(keys.PERCEIVED_READING, features[..., -len(READING):])
         action = tensordict.get(keys.ACTION)
         push_on = (any_push & (gain < 0)).reshape(action.shape)
         chosen = torch.where(push_on, best_push.reshape(action.shape), torch.full_like(action, actions.STOP))

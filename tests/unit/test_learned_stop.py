@@ -12,6 +12,7 @@ from mqa_rl import keys
 from mqa_rl.envs import actions
 from mqa_rl.modules.learned_stop import (FEATURES, LearnedStop, StopCritic, policy_fingerprint, reading_env_kwargs,
                                         stop_features)
+from mqa_rl.modules.kept_frame import FrameKeeper
 from mqa_rl.modules.perceived_count import READING, PerceivedCount, file_sha256
 from mqa_rl.modules.perception import CountingPerception, save_perception
 from mqa_rl.modules.vote_counting import MAX_COUNT
@@ -220,11 +221,24 @@ def test_a_critic_reading_the_perception_round_trips_and_refuses_another_percept
     assert features.shape == (2, width)
     torch.testing.assert_close(features[:, len(FEATURES):], reading.read(td))
     assert out[keys.ACTION].shape == (2,)
+    torch.testing.assert_close(out[keys.PERCEIVED_READING], reading.read(td))     # left in the state for a keeper
+    keeper, own = FrameKeeper(reading, stop), FrameKeeper(reading)
+    assert keeper.reuse and not own.reuse
+    episode = td.clone()
+    episode.set(keys.QUESTION, td[keys.QUESTION][:1].expand(2, -1).clone())     # an episode asks one question
+    out = stop(episode)
+    states = [s.exclude(keys.PERCEIVED_READING) if i == 2 else s for i, s in enumerate([*out.unbind(0), out[0]])]
+    assert keeper.choose(states) == own.choose(states)                            # the same frame, fewer readings
+    keeper.reading = None                                                         # the reused ones need no perception
+    with pytest.raises(AttributeError):
+        keeper.choose(states)                                                     # ... but the last state's does
+    assert keeper.choose(states[:2]) == own.choose(states[:2])
     assert reading_env_kwargs(loaded.reading, image_size=size // 2) == {"answer_size": size, "answer_observation": True}
     assert reading_env_kwargs(loaded.reading, image_size=size) == {} and reading_env_kwargs(None, 224) == {}
     save_perception(CountingPerception(5, widths=(8, 8, 16, 16)), path, {})   # another perception at that path
     with pytest.raises(ValueError, match="SHA-256 differs"):
         StopCritic.load(saved)
+    assert not FrameKeeper(PerceivedCount.from_file(path, reading.token_channel), stop).reuse   # another file: read anew
 
 
 def test_the_shipped_perceiving_critic_reads_the_shipped_perception_on_the_answer_camera():
