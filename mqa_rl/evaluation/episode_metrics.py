@@ -62,7 +62,7 @@ def episode_metrics(final: TensorDictBase, simple_threshold: float = 0.2) -> dic
     out["into_view"] = torch.where(has_target, into.to(torch.float32), nan)
     out["out_of_view"] = torch.where(has_target, out_of.to(torch.float32), nan)
     out["in_view_change"] = torch.where(has_target, (into - out_of).to(torch.float32), nan)
-    made, buried = (end & ~start).sum(-1).to(torch.float32), (start & ~end).sum(-1).to(torch.float32)
+    made, buried = _crossings(start, end)
     out.update(countable_made=made, countable_buried=buried, countable_gain=made - buried)
     qtype = final.get(keys.QUESTION_TYPE, None)
     counting = (qtype.squeeze(-1) == COUNTING) if qtype is not None else torch.zeros_like(has_target)
@@ -89,13 +89,19 @@ def kept_frame_metrics(start: TensorDictBase, state: TensorDictBase) -> dict[str
     ``chi_kept`` and ``hidden_kept`` (the targets' mean χ and fraction fully hidden in it; NaN without target)."""
     tmask = state.get(keys.TARGET_MASK)
     counting = state.get(keys.QUESTION_TYPE).reshape(tmask.shape[:-1]) == COUNTING
-    before, after = targets_in_view(start), targets_in_view(state)
+    after = targets_in_view(state)
+    made, buried = _crossings(targets_in_view(start), after)
     has_target = tmask.any(-1)
     nan = torch.full(has_target.shape, math.nan)
     return {"counter_kept": _counter_right(after, tmask.sum(-1), counting),
-            "countable_gain_kept": ((after & ~before).sum(-1) - (before & ~after).sum(-1)).to(torch.float32),
+            "countable_gain_kept": made - buried,
             "chi_kept": torch.where(has_target, mean_target_chi(state).squeeze(-1), nan),
             "hidden_kept": torch.where(has_target, _hidden_fraction(state), nan)}
+
+
+def _crossings(before: torch.Tensor, after: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """[E] each: targets countable in ``after`` and not in ``before`` (made countable), and the reverse (buried)."""
+    return (after & ~before).sum(-1).to(torch.float32), (before & ~after).sum(-1).to(torch.float32)
 
 
 def _hidden_fraction(td: TensorDictBase) -> torch.Tensor:
