@@ -13,6 +13,8 @@
 #   4. with MQA_EVAL=<episodes per level>: greedy + learned stop vs random on the test split
 #      (MQA_BASELINE=<an earlier evaluation's out_dir>: reuse its random episodes when they are the same questions)
 #   Steps 3 and 4 run the policy with the profile's push memory (env.push_memory=1: no push twice in an episode).
+#   MQA_OWN_STOP=0: no step 3 (a system that pushes its budget and answers from its kept frame needs no stop;
+#   step 4 then measures that, docs/policy.md "The budget and the kept frame").
 #
 #   bash tools/train_student.sh [ROOT] [SEED] [train_dqn overrides ...]     # ROOT defaults to runs/student
 #

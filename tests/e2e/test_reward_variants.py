@@ -42,3 +42,16 @@ def test_the_variants_continue_the_students_network_with_a_gentle_rl_phase():
     assert variant.model == student.model and variant.env == student.env and variant.buffer == student.buffer
     assert variant.optim.lr == 1e-4 < student.optim.lr and variant.demos.weight == 2.0 > student.demos.weight
     assert {k: v for k, v in variant.demos.items() if k != "weight"} == {k: v for k, v in student.demos.items() if k != "weight"}
+
+
+def test_it_refuses_an_unknown_own_stop_setting_before_writing(tmp_path):
+    """MQA_OWN_STOP=0 (no stop fitted: the budget-and-kept-frame system) or 1; anything else is refused at once,
+    not after minutes of training when the stop step comes."""
+    student = tmp_path / "student"
+    (student / "dqn" / "checkpoints" / "checkpoint-000000000008").mkdir(parents=True)
+    (student / "dqn" / "config.yaml").write_text("seed: 0\ncollector: {total_frames: 8}\n")
+    (student / "demos_1").mkdir()
+    (student / "demos_1" / "demos.json").write_text("{}")
+    done = run_variants(student, tmp_path / "out", 100, MQA_VARIANTS="countable", MQA_OWN_STOP="no")
+    assert done.returncode == 2 and "MQA_OWN_STOP must be 1" in done.stderr and "got 'no'" in done.stderr
+    assert not (tmp_path / "out").exists()
