@@ -5,7 +5,7 @@
 #                       MQA_OWN_STOP=0: no stop fitted (a system that pushes its budget and answers from its kept
 #                       frame needs none; docs/policy.md)
 #   evaluate_on_test ROOT   with MQA_EVAL=<episodes per level>: greedy + learned stop vs random on the test split
-#                       (MQA_OWN_STOP=0: greedy pushing its budget, measured on its kept frame, MQA_KEPT_FRAME=<perception.pt>)
+#                       (MQA_OWN_STOP=0: greedy pushing its budget, measured on the frame the shipped perception keeps)
 #                       -> ROOT/eval (MQA_BASELINE=<an earlier evaluation's out_dir>: reuse its random episodes)
 # Both run the policy with its run's push memory (fit_stop.py and evaluate_policy.py read it from ROOT/dqn).
 case "${MQA_OWN_STOP:-1}" in    # refused before any step writes
@@ -24,7 +24,7 @@ fit_own_stop() {
 evaluate_on_test() {
   if [ -n "${MQA_EVAL:-}" ]; then
     if [ "${MQA_OWN_STOP:-1}" = 0 ]; then    # its budget of pushes, measured on the frame the perception counts most in
-      how=(stop_margin=inf "kept_frame=${MQA_KEPT_FRAME:-checkpoints/vqa_counting/perception.pt}"); what="its budget, kept frame"
+      how=(stop_margin=inf kept_frame=checkpoints/vqa_counting/perception.pt); what="its budget, kept frame"
     else
       how=("stop_critic=$1/stop"); what="learned stop"
     fi
