@@ -331,7 +331,7 @@ def test_frames_perception_and_counting_vqa_recipes_end_to_end(small_dataset, sp
 
 
 @pytest.mark.parametrize("system", ["no_manipulation", "random", "dqn_student", "privileged", "privileged_countable",
-                                    "dqn_countable"])
+                                    "dqn_countable", "dqn_countable_budget_kept"])
 def test_the_shipped_counting_vqas_load_with_their_provenance_and_answer(system, small_dataset):
     """checkpoints/vqa_counting: the perception and each system's head load, match the hashes their
     provenance records, count with the calibrated settings, and answer through the public contract."""
