@@ -8,14 +8,15 @@
 #                       (MQA_OWN_STOP=0: greedy pushing its budget, measured on the frame the shipped perception keeps)
 #                       -> ROOT/eval (MQA_BASELINE=<an earlier evaluation's out_dir>: reuse its random episodes)
 # Both run the policy with its run's push memory (fit_stop.py and evaluate_policy.py read it from ROOT/dqn).
-case "${MQA_OWN_STOP:-1}" in    # refused before any step writes
+MQA_OWN_STOP="${MQA_OWN_STOP:-1}"
+case "$MQA_OWN_STOP" in    # refused before any step writes
   0|1) ;;
   *) echo "MQA_OWN_STOP must be 1 (fit the policy's own stop, the default) or 0 (none), got '$MQA_OWN_STOP'" >&2; exit 2 ;;
 esac
 start=$SECONDS
 step() { echo "=== [$(( (SECONDS - start) / 60 )) min $(( (SECONDS - start) % 60 )) s] $*"; }
 fit_own_stop() {
-  if [ "${MQA_OWN_STOP:-1}" = 0 ]; then step "no stop fitted (MQA_OWN_STOP=0)"; return 0; fi
+  if [ "$MQA_OWN_STOP" = 0 ]; then step "no stop fitted (MQA_OWN_STOP=0)"; return 0; fi
   if [ ! -f "$1/stop/stop_critic.pt" ]; then
     step "its stop, from its own pushes on the train split -> $1/stop"
     python recipes/fit_stop.py "run=$1/dqn" episodes_per_level=100 "value=${MQA_STOP_VALUE:-chi}" "out_dir=$1/stop"
@@ -23,7 +24,7 @@ fit_own_stop() {
 }
 evaluate_on_test() {
   if [ -n "${MQA_EVAL:-}" ]; then
-    if [ "${MQA_OWN_STOP:-1}" = 0 ]; then    # its budget of pushes, measured on the frame the perception counts most in
+    if [ "$MQA_OWN_STOP" = 0 ]; then    # its budget of pushes, measured on the frame the perception counts most in
       how=(stop_margin=inf kept_frame=checkpoints/vqa_counting/perception.pt); what="its budget, kept frame"
     else
       how=("stop_critic=$1/stop"); what="learned stop"
