@@ -50,7 +50,7 @@ from mqa_rl.modules.push_policy import make_push_qnet
 from mqa_rl.training.run_logger import RunLogger
 from mqa_rl.training.signals import exit_on_sigterm
 from mqa_rl.training.vqa_data import scene_split
-from mqa_rl.transforms.dihedral import DIHEDRAL, dihedral
+from mqa_rl.transforms.dihedral import random_dihedral
 
 RECOGNITION_FILE = "recognition.pt"
 
@@ -83,11 +83,8 @@ def labelled_frames(cfg: DictConfig, dataset: MQADataset, out: Path) -> TensorDi
 
 def augment(batch: TensorDict) -> TensorDict:
     """The same random dihedral transform of rgb and the per-cell labels, per frame."""
-    k = torch.randint(DIHEDRAL, (batch.shape[0],))
-    for key in (keys.RGB, keys.CLASS_CELLS):
-        x = batch.get(key).clone()
-        for t in k.unique().tolist():
-            x[k == t] = dihedral(x[k == t], t)
+    names = (keys.RGB, keys.CLASS_CELLS)
+    for key, x in zip(names, random_dihedral(*(batch.get(key) for key in names))):
         batch.set(key, x)
     return batch
 

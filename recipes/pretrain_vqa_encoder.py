@@ -41,18 +41,15 @@ from mqa_rl.training.model_checkpoint import ModelCheckpoint
 from mqa_rl.training.run_logger import RunLogger, trim_scalars
 from mqa_rl.training.signals import exit_on_sigterm
 from mqa_rl.training.vqa_data import pretraining_frames, scene_split
-from mqa_rl.transforms.dihedral import DIHEDRAL, dihedral
+from mqa_rl.transforms.dihedral import random_dihedral
 
 ENCODER_FILE = "encoder.pt"
 
 
 def augment(batch: TensorDict) -> TensorDict:
-    """The same random dihedral transform of rgb, depth and class map, per frame."""
-    k = torch.randint(DIHEDRAL, (batch.shape[0],)).to(batch.device)   # drawn on the CPU: the same stream anywhere
-    for key in (keys.RGB, keys.DEPTH, keys.CLASS_MAP, keys.OBJECT_MAP):
-        x = batch.get(key).clone()
-        for t in k.unique().tolist():
-            x[k == t] = dihedral(x[k == t], t)
+    """The same random dihedral transform of rgb, depth and the label maps, per frame."""
+    names = (keys.RGB, keys.DEPTH, keys.CLASS_MAP, keys.OBJECT_MAP)
+    for key, x in zip(names, random_dihedral(*(batch.get(key) for key in names))):
         batch.set(key, x)
     return batch
 

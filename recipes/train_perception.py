@@ -49,7 +49,7 @@ from mqa_rl.training.run_dir import RunLock, positive_ints, refuse_unresumable
 from mqa_rl.training.run_logger import RunLogger, trim_scalars
 from mqa_rl.training.signals import exit_on_sigterm
 from mqa_rl.training.vqa_data import scene_split
-from mqa_rl.transforms.dihedral import DIHEDRAL, dihedral
+from mqa_rl.transforms.dihedral import random_dihedral
 
 PERCEPTION_FILE = "perception.pt"
 # what training reads of a frame (a depth perception also its DEPTH: an rgb run leaves it on disk)
@@ -169,17 +169,6 @@ def init_weights(model: CountingPerception, path: str) -> None:
                          f"model.backbone={model.backbone}, model.depth={model.depth} "
                          f"(missing {missing[:4]}, unexpected {unexpected[:4]}{shapes}): match the architecture it was trained with")
     print(f"started from {path} (new heads: {sorted({k.split('.')[0] for k in missing}) or 'none'})")
-
-
-def augment(*images: torch.Tensor) -> tuple[torch.Tensor, ...]:
-    """The same random dihedral transform of each frame's images (rgb, object map, depth: [B, ..., S, S]);
-    the bin seen from above is symmetric."""
-    k = torch.randint(DIHEDRAL, (images[0].shape[0],), device=images[0].device)
-    out = tuple(x.clone() for x in images)
-    for t in k.unique().tolist():
-        for x, y in zip(images, out):
-            y[k == t] = dihedral(x[k == t], t)
-    return out
 
 
 def random_crop(size: int, *images: torch.Tensor) -> tuple[tuple[torch.Tensor, ...], torch.Tensor]:
@@ -318,7 +307,7 @@ def _train(cfg: DictConfig, out: Path) -> dict:
             idx = torch.randint(n_train, (cfg.train.batch_size,), device=rgb_all.device)
             images = (rgb_all[idx], omap_all[idx]) + ((depth_all[idx],) if depth_all is not None else ())
             if cfg.train.augment:
-                images = augment(*images)
+                images = random_dihedral(*images)
             batch = {keys.OBJECT_CLASSES: cls_all[idx].to(device), keys.FRAME_VISIBLE: vis_all[idx].to(device)}
             if cfg.train.crop:
                 images, slot_area = random_crop(int(cfg.train.crop), *images)

@@ -31,7 +31,7 @@ from mqa_rl.data import MQADataset
 from mqa_rl.data.dataset import dataset_fingerprint
 from mqa_rl.files import write_atomic
 from mqa_rl.modules.vqa import split_repeats
-from mqa_rl.transforms.dihedral import DIHEDRAL, dihedral
+from mqa_rl.transforms.dihedral import dihedral, random_dihedral
 
 RECORD_KEYS = (keys.QUESTION, keys.ANSWER_LABEL, keys.TYPE_LABEL, keys.LEVEL, keys.SCENE, keys.QUESTION_ID,
                keys.PUSHES, keys.STOPPED, keys.CHI_START, keys.CHI_END)
@@ -194,11 +194,7 @@ class Batches:
             batch.set(keys.FIRST_FEATURES, first[rows, t].float())
             batch.set(keys.LAST_FEATURES, last[rows, t].float())
         elif augment:
-            k = torch.randint(DIHEDRAL, (len(idx),))
-            for key in IMAGE_KEYS:
-                images = batch.get(key).clone()
-                for t in k.unique().tolist():
-                    images[k == t] = dihedral(images[k == t], t)
+            for key, images in zip(IMAGE_KEYS, random_dihedral(*(batch.get(key) for key in IMAGE_KEYS))):
                 batch.set(key, images)
         return batch
 

@@ -49,6 +49,18 @@ def dihedral(x: torch.Tensor, index: int) -> torch.Tensor:
     return x.flip(-1) if index >= 4 else x
 
 
+def random_dihedral(*images: torch.Tensor) -> tuple[torch.Tensor, ...]:
+    """The same random symmetry per frame of each of ``images`` ([B, ..., S, S]: rgb, depth, label maps), for the
+    frame pipelines that learn from single frames: the bin seen from above is symmetric. Drawn on the CPU, so that a
+    seed gives the same stream on any device."""
+    k = torch.randint(DIHEDRAL, (images[0].shape[0],)).to(images[0].device)
+    out = tuple(x.clone() for x in images)
+    for t in k.unique().tolist():
+        for x, y in zip(images, out):
+            y[k == t] = dihedral(x[k == t], t)
+    return out
+
+
 def transform_push_map(q: torch.Tensor, k: int, mirror: bool) -> torch.Tensor:
     """Apply the symmetry to per-action values [..., 6273] (a Q vector, a mask)."""
     push = q[..., : actions.NUM_PUSHES].unflatten(-1, (actions.DIRECTIONS, actions.GRID, actions.GRID))

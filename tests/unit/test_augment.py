@@ -12,8 +12,8 @@ from tensordict import TensorDict
 from mqa_rl import keys
 from mqa_rl.collectors.replay import make_replay_buffer
 from mqa_rl.envs import actions
-from mqa_rl.transforms.dihedral import (DIHEDRAL, DihedralAugment, dihedral, mirror_first, transform_action,
-                                        transform_images, transform_push_map)
+from mqa_rl.transforms.dihedral import (DIHEDRAL, DihedralAugment, dihedral, mirror_first, random_dihedral,
+                                        transform_action, transform_images, transform_push_map)
 
 ELEMENTS = [(k, m) for m in (False, True) for k in range(4)]
 
@@ -109,3 +109,14 @@ def test_replay_samples_come_out_turned_and_consistent(tmp_path):
 def test_unknown_augment_is_refused():
     with pytest.raises(ValueError, match="augment"):
         make_replay_buffer({"size": 8, "batch_size": 4, "storage": "memory", "augment": "flip"}, None)
+
+
+def test_random_dihedral_turns_every_image_of_a_frame_by_the_same_drawn_symmetry():
+    torch.manual_seed(0)
+    rgb = torch.randint(0, 255, (64, 3, 6, 6), dtype=torch.uint8)
+    labels = rgb[:, 0].clone()                       # a label map that is a function of the pixels it labels
+    out_rgb, out_labels = random_dihedral(rgb, labels)
+    assert torch.equal(out_labels, out_rgb[:, 0])    # image and labels turned alike, frame by frame
+    drawn = [next(t for t in range(DIHEDRAL) if torch.equal(dihedral(rgb[i], t), out_rgb[i])) for i in range(64)]
+    assert len(set(drawn)) > 4                       # frames draw their own symmetries
+    assert torch.equal(labels, rgb[:, 0])            # the inputs are left as they were
