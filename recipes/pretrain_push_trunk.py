@@ -50,7 +50,7 @@ from mqa_rl.modules.push_policy import make_push_qnet
 from mqa_rl.training.run_logger import RunLogger
 from mqa_rl.training.signals import exit_on_sigterm
 from mqa_rl.training.vqa_data import scene_split
-from mqa_rl.transforms.dihedral import random_dihedral
+from mqa_rl.transforms.dihedral import random_dihedral_in
 
 RECOGNITION_FILE = "recognition.pt"
 
@@ -79,14 +79,6 @@ def labelled_frames(cfg: DictConfig, dataset: MQADataset, out: Path) -> TensorDi
     (tmp / "frames.json").write_text(json.dumps(wanted, indent=1))
     os.replace(tmp, cache)
     return frames
-
-
-def augment(batch: TensorDict) -> TensorDict:
-    """The same random dihedral transform of rgb and the per-cell labels, per frame."""
-    names = (keys.RGB, keys.CLASS_CELLS)
-    for key, x in zip(names, random_dihedral(*(batch.get(key) for key in names))):
-        batch.set(key, x)
-    return batch
 
 
 @torch.no_grad()
@@ -182,7 +174,7 @@ def pretrain(cfg: DictConfig) -> dict:
     try:
         for step in range(1, t.steps + 1):
             batch = train_frames[torch.randint(len(train_frames), (t.batch_size,))]
-            td = loss(augment(batch) if t.augment else batch)
+            td = loss(random_dihedral_in(batch, (keys.RGB, keys.CLASS_CELLS)) if t.augment else batch)
             optim.zero_grad()
             td["loss_class_cells"].backward()
             torch.nn.utils.clip_grad_norm_(params, t.max_grad_norm)

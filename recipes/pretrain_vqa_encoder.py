@@ -41,17 +41,9 @@ from mqa_rl.training.model_checkpoint import ModelCheckpoint
 from mqa_rl.training.run_logger import RunLogger, trim_scalars
 from mqa_rl.training.signals import exit_on_sigterm
 from mqa_rl.training.vqa_data import pretraining_frames, scene_split
-from mqa_rl.transforms.dihedral import random_dihedral
+from mqa_rl.transforms.dihedral import random_dihedral_in
 
 ENCODER_FILE = "encoder.pt"
-
-
-def augment(batch: TensorDict) -> TensorDict:
-    """The same random dihedral transform of rgb, depth and the label maps, per frame."""
-    names = (keys.RGB, keys.DEPTH, keys.CLASS_MAP, keys.OBJECT_MAP)
-    for key, x in zip(names, random_dihedral(*(batch.get(key) for key in names))):
-        batch.set(key, x)
-    return batch
 
 
 @torch.no_grad()
@@ -149,7 +141,7 @@ def pretrain(cfg: DictConfig) -> dict:
         while state["step"] < t.steps:
             t_step = time.perf_counter()
             batch = train_frames[torch.randint(len(train_frames), (t.batch_size,)).to(device)]
-            batch = augment(batch) if t.augment else batch
+            batch = random_dihedral_in(batch, (keys.RGB, keys.DEPTH, keys.CLASS_MAP, keys.OBJECT_MAP)) if t.augment else batch
             td = loss(batch)
             total = sum(v for k, v in td.items() if k.startswith("loss_"))
             optim.zero_grad()

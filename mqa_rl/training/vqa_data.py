@@ -31,7 +31,7 @@ from mqa_rl.data import MQADataset
 from mqa_rl.data.dataset import dataset_fingerprint
 from mqa_rl.files import write_atomic
 from mqa_rl.modules.vqa import split_repeats
-from mqa_rl.transforms.dihedral import dihedral, random_dihedral
+from mqa_rl.transforms.dihedral import dihedral, random_dihedral_in
 
 RECORD_KEYS = (keys.QUESTION, keys.ANSWER_LABEL, keys.TYPE_LABEL, keys.LEVEL, keys.SCENE, keys.QUESTION_ID,
                keys.PUSHES, keys.STOPPED, keys.CHI_START, keys.CHI_END)
@@ -194,8 +194,7 @@ class Batches:
             batch.set(keys.FIRST_FEATURES, first[rows, t].float())
             batch.set(keys.LAST_FEATURES, last[rows, t].float())
         elif augment:
-            for key, images in zip(IMAGE_KEYS, random_dihedral(*(batch.get(key) for key in IMAGE_KEYS))):
-                batch.set(key, images)
+            random_dihedral_in(batch, IMAGE_KEYS)
         return batch
 
     def all(self, batch_size: int):

@@ -61,6 +61,13 @@ def random_dihedral(*images: torch.Tensor) -> tuple[torch.Tensor, ...]:
     return out
 
 
+def random_dihedral_in(batch: TensorDictBase, names) -> TensorDictBase:
+    """``random_dihedral`` of the entries ``names`` of a frame batch, written back in place."""
+    for key, x in zip(names, random_dihedral(*(batch.get(key) for key in names))):
+        batch.set(key, x)
+    return batch
+
+
 def transform_push_map(q: torch.Tensor, k: int, mirror: bool) -> torch.Tensor:
     """Apply the symmetry to per-action values [..., 6273] (a Q vector, a mask)."""
     push = q[..., : actions.NUM_PUSHES].unflatten(-1, (actions.DIRECTIONS, actions.GRID, actions.GRID))
