@@ -45,7 +45,7 @@ from mqa_rl.files import write_atomic
 from mqa_rl.modules.frozen_policies import resolve_checkpoint, system_spec
 from mqa_rl.modules.vqa import CHECKPOINT_NAME, answer_size_for, load_vqa
 from mqa_rl.modules.vqa_ensemble import VQAEnsemble
-from mqa_rl.training.vqa_data import IMAGE_KEYS, RECORD_KEYS, load_answering_records
+from mqa_rl.training.vqa_data import RECORD_KEYS, frame_keys
 
 EVAL_KEYS = (*RECORD_KEYS, keys.EPISODE_TARGETS, (keys.FIRST, keys.FRAME_VISIBLE),
              (keys.LAST, keys.FRAME_VISIBLE))
@@ -124,12 +124,12 @@ def evaluate_system(cfg: DictConfig, ds: MQADataset, name: str, plan_sha: str) -
         if meta.get("system") not in (None, name):
             warnings.warn(f"{path} was trained on the rollouts of {meta['system']!r}, not {name!r}", stacklevel=2)
     try:   # the frames this VQA reads: the answer camera's where its perception reads finer than the env renders
-        records.update(load_answering_records(store, size=model.frame_size).select(*IMAGE_KEYS))
+        frame_keys(store, model.frame_size)
     except ValueError as error:
         return missing(str(error), f"python recipes/collect_rollouts.py system={name} questions={q} 'splits=[test]' "
                                    f"collection.env.answer_size={model.frame_size} overwrite=true"), None, None
     t1 = time.perf_counter()
-    right = ans.predict(model, records, cfg.batch_size) == records.get(keys.ANSWER_LABEL)
+    right = ans.predict_from_store(model, store, records, cfg.batch_size) == records.get(keys.ANSWER_LABEL)
     counting = records.get(keys.TYPE_LABEL) == QUESTION_TYPES.index("counting")
     sub = records[counting]
     vqa_meta = [{k: meta.get(k) for k in ("step", "train_episodes", "val_episodes")} for meta in members]

@@ -240,6 +240,12 @@ class VQAModel(nn.Module):
         return self.encoder.input_size if self.pool == "counts" else None
 
     @property
+    def feature_reader(self) -> "VQAModel | None":
+        """Itself where what ``encode_frames`` gives is small enough to cache per rollout store (the counting
+        perception's count features, ~0.6 kB a frame; ``recipes/evaluate.py`` reads them back), else None."""
+        return self if self.pool == "counts" else None
+
+    @property
     def invariant_features(self) -> bool:
         """Whether what ``encode_frames`` gives is the same for a rotated or mirrored image (counts are):
         then caching the 8 dihedral transforms of each frame buys nothing."""

@@ -55,8 +55,18 @@ class VQAEnsemble:
             return torch.stack([m.answer_probs(question_tokens, first_rgb, last_rgb) for m in self.members]).mean(0)
         for m in self.members:
             m.check_tokens(question_tokens)
-        features = self.members[0].frame_features(first_rgb, last_rgb, question_tokens.shape[0])
-        return torch.stack([m.answer_probs_from_features(question_tokens, *features) for m in self.members]).mean(0)
+        return self.answer_probs_from_features(question_tokens,
+                                               *self.members[0].frame_features(first_rgb, last_rgb, question_tokens.shape[0]))
+
+    def answer_probs_from_features(self, question_tokens: torch.Tensor, first: torch.Tensor, last: torch.Tensor) -> torch.Tensor:
+        """``answer_probs`` from the shared perception's ``frame_features`` (``shared_encoder`` only; tokens checked
+        by the caller)."""
+        return torch.stack([m.answer_probs_from_features(question_tokens, first, last) for m in self.members]).mean(0)
+
+    @property
+    def feature_reader(self) -> VQAModel | None:
+        """The member whose ``encode_frames`` all members read (seeds of a head on one frozen perception), else None."""
+        return self.members[0] if self.shared_encoder else None
 
 
 def _same_weights(a: torch.nn.Module, b: torch.nn.Module) -> bool:

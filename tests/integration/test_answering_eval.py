@@ -217,9 +217,11 @@ def test_the_goals_are_checked_for_each_family_of_reward_variants():
     assert "dqfd_global_local" in verdict({"systems": {"random": system(0.4, 0.0)}})[0]   # says which names count
 
 
-def test_evaluate_collects_the_answer_cameras_frames_a_finer_vqa_reads(small_dataset, answering_root, tmp_path):
+def test_evaluate_collects_the_answer_cameras_frames_a_finer_vqa_reads(small_dataset, answering_root, tmp_path, monkeypatch):
     """A VQA on a perception that reads 448 px: evaluate.py collects its missing test rollouts with the answer camera
-    and answers from its frames; a store of 224-px frames only is reported missing with the command that fixes it."""
+    and answers from its frames; a store of 224-px frames only is reported missing with the command that fixes it.
+    The perception's features are kept beside the test store: answered from them as from the frames, and a second
+    evaluation runs no perception."""
     from mqa_rl.modules.perception import CountingPerception
     root, overrides = answering_root
     perception = CountingPerception(1 + len(small_dataset.classes), widths=(8, 8, 16, 16), image_size=448)
@@ -235,5 +237,23 @@ def test_evaluate_collects_the_answer_cameras_frames_a_finer_vqa_reads(small_dat
     results = evaluate.evaluate(compose_recipe_config("evaluate", [*base, f"rollouts_dir={tmp_path / 'rollouts'}",
                                                                    f"out_dir={tmp_path / 'r448'}"]))
     assert results["systems"]["no_manipulation"]["status"] == "ok"
-    meta = json.loads((tmp_path / "rollouts" / "no_manipulation" / "test" / "meta.json").read_text())
+    store = tmp_path / "rollouts" / "no_manipulation" / "test"
+    meta = json.loads((store / "meta.json").read_text())
     assert meta["env"]["answer_size"] == 448
+    from mqa_rl.modules.vqa import load_vqa
+    from mqa_rl.training.vqa_data import encode_store, encoder_fingerprint, load_answering_records
+    assert len(list((store / "features").iterdir())) == 1
+    loaded = load_vqa(tmp_path / "vqa" / "no_manipulation")
+    frames = load_answering_records(store, size=448)
+    first, last = (frames.get(k).permute(0, 2, 3, 1) for k in (keys.FIRST_RGB, keys.LAST_RGB))
+    cached = encode_store(store, None, size=448, cache_key=encoder_fingerprint(loaded.encoder))   # None: read, not computed
+    from_features = loaded.answer_probs_from_features(frames.get(keys.QUESTION), *(
+        cached.get(k)[:, 0].float() for k in (keys.FIRST_FEATURES, keys.LAST_FEATURES)))
+    assert torch.allclose(from_features, loaded.answer_probs(frames.get(keys.QUESTION), first, last), atol=1e-3)
+
+    def no_perception(*args, **kwargs):
+        raise AssertionError("the perception ran although its features are cached")
+    monkeypatch.setattr(CountingPerception, "count_features", no_perception)
+    again = evaluate.evaluate(compose_recipe_config("evaluate", [*base, f"rollouts_dir={tmp_path / 'rollouts'}",
+                                                                 f"out_dir={tmp_path / 'again'}"]))
+    assert again["systems"]["no_manipulation"]["accuracy"] == results["systems"]["no_manipulation"]["accuracy"]

@@ -175,7 +175,10 @@ def test_counting_vqa_answers_through_the_public_contract_and_reloads(tmp_path):
     alone = (again.answer_probs(tokens, img, img) + seed1.answer_probs(tokens, img, img)) / 2
     assert pair.shared_encoder and torch.allclose(pair.answer_probs(tokens, img, img), alone, atol=1e-6)
     scratch = VQAModel(vocab, ["0", "1", "2", "3"], pool="counts", cell_heads=2, perception=perception.config())
-    assert not VQAEnsemble([again, load_vqa(save_vqa(scratch, tmp_path / "scratch.pt"))]).shared_encoder
+    mixed = VQAEnsemble([again, load_vqa(save_vqa(scratch, tmp_path / "scratch.pt"))])
+    assert not mixed.shared_encoder and mixed.feature_reader is None
+    # whose features evaluate.py caches per store: a counting head's, one perception's seeds' (not EQA's maps)
+    assert again.feature_reader is again and pair.feature_reader is pair.members[0] and VQAModel(vocab, ["0"]).feature_reader is None
 
 
 def test_a_fine_tuned_counting_vqa_reads_the_frozen_numbers_and_sends_gradients_to_density_and_classes():
