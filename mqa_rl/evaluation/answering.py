@@ -1,7 +1,6 @@
 """How well an MQA system answers, from its test rollouts (``mqa_rl.collectors.rollouts``) and its VQA.
 
-* ``predict``: the VQA's answers to the stored episodes (through the public ``answer_probs``);
-  ``predict_from_store``: the same for a rollout store, a counting VQA reading the perception's features cached there.
+* ``predict``: the VQA's answers to the stored episodes (through the public ``answer_probs``).
 * ``accuracy_table``: accuracy per (question type, level) with Wilson 95 % intervals: with ~200
   questions per level and accuracies near 0.3-0.6, a normal interval would be fine too, but Wilson
   stays inside [0, 1] for the small groups of tiny runs.
@@ -35,7 +34,6 @@ from mqa_rl import keys
 from mqa_rl.data.dataset import LEVELS
 from mqa_rl.data.questions import QUESTION_TYPES
 from mqa_rl.evaluation.episode_metrics import mean_ci95, scene_bootstrap_ci95
-from mqa_rl.training.vqa_data import IMAGE_KEYS, encode_store, encoder_fingerprint, load_answering_records
 from mqa_rl.transforms.episode_stats import COUNTABLE_PX
 
 EITHER = "either"          # countable_targets' frame: a target countable in I_start or in I_stop
@@ -61,35 +59,6 @@ def predict(model, records: TensorDict, batch_size: int = 64) -> torch.Tensor:
         last = batch.get(keys.LAST_RGB).permute(0, 2, 3, 1)
         out.append(model.answer_probs(batch.get(keys.QUESTION), first, last).argmax(-1))
     return torch.cat(out) if out else torch.zeros(0, dtype=torch.int64)
-
-
-def predict_from_store(model, store, records: TensorDict, batch_size: int = 64) -> torch.Tensor:
-    """``predict`` for ``records`` (a rollout store's records in slot order, without their frames). A counting VQA,
-    or seeds of one on a shared perception (``feature_reader``), answers from the perception's features cached
-    under the store by ``encode_store``, as its training read them: a second evaluation, or another seed, skips
-    the perception (~100 s for a store's 600 pairs of 448-px frames on 2 cores). Other VQAs read the frames."""
-    reader = model.feature_reader
-    if reader is None:
-        frames = load_answering_records(store, size=model.frame_size).select(keys.SLOT, *IMAGE_KEYS)
-        _check_slots(records, frames, store)
-        return predict(model, frames.update(records.select(keys.QUESTION)), batch_size)
-    device = next(reader.parameters()).device
-    reader.eval()
-    feats = encode_store(store, lambda x: reader.encode_frames(x.to(device)).cpu(), batch_size=batch_size,
-                         size=reader.frame_size, cache_key=encoder_fingerprint(reader.encoder))
-    _check_slots(records, feats, store)
-    out = []
-    for start in range(0, records.shape[0], batch_size):
-        question = records.get(keys.QUESTION)[start:start + batch_size]
-        reader.check_tokens(question)
-        first, last = (feats.get(k)[start:start + batch_size, 0].float() for k in (keys.FIRST_FEATURES, keys.LAST_FEATURES))
-        out.append(model.answer_probs_from_features(question, first, last).argmax(-1))
-    return torch.cat(out) if out else torch.zeros(0, dtype=torch.int64)
-
-
-def _check_slots(records: TensorDict, read: TensorDict, store) -> None:
-    if not torch.equal(records.get(keys.SLOT), read.get(keys.SLOT)):
-        raise ValueError(f"{store} changed while it was read (other episodes than its records): evaluate it again")
 
 
 def groups(records: TensorDict):
