@@ -162,10 +162,10 @@ def predict_from_store(model, store, records: TensorDict, batch_size: int = 64) 
     feats = encode_store(store, lambda x: reader.encode_frames(x.to(device)).cpu(), batch_size=batch_size,
                          size=reader.frame_size, cache_key=encoder_fingerprint(reader.encoder))
     _check_slots(records, feats, store)
+    reader.check_tokens(records.get(keys.QUESTION))
     out = []
     for start in range(0, records.shape[0], batch_size):
         question = records.get(keys.QUESTION)[start:start + batch_size]
-        reader.check_tokens(question)
         first, last = (feats.get(k)[start:start + batch_size, 0].float() for k in (keys.FIRST_FEATURES, keys.LAST_FEATURES))
         out.append(model.answer_probs_from_features(question, first, last).argmax(-1))
     return torch.cat(out) if out else torch.zeros(0, dtype=torch.int64)
