@@ -63,6 +63,8 @@ def check_config(cfg: DictConfig) -> None:
         raise ValueError(f"train.grounding_weight={t.grounding_weight} must be ≥ 0 (0: the question's classes learnt from answers only)")
     if t.select not in SELECT:
         raise ValueError(f"train.select={t.select!r}: choose one of {sorted(SELECT)} (the validation metric that picks vqa.pt)")
+    if t.patience_steps is not None:
+        positive_ints(cfg, "train.patience_steps")
     if not 0.0 <= t.val_fraction < 1.0:
         raise ValueError(f"train.val_fraction={t.val_fraction} must lie in [0, 1)")
     if not Path(cfg.dataset).exists():
@@ -210,8 +212,12 @@ def _train(cfg: DictConfig, out: Path) -> dict:
     elif cfg.resume:
         print(f"resume=true but no checkpoint in {ckpt.directory}: starting a new run")
     steps = int(cfg.train.steps)
-    if state["step"] >= steps and (out / CHECKPOINT_NAME).exists():
-        print(f"{out} has finished its {state['step']} steps already (raise train.steps to train on)")
+    patience = cfg.train.patience_steps
+    stopped = patience is not None and state["best_step"] >= 0 and state["step"] - state["best_step"] >= patience
+    if (state["step"] >= steps or stopped) and (out / CHECKPOINT_NAME).exists():
+        print(f"{out} has finished its {state['step']} steps already" + (
+            f" (no better val/{cfg.train.select} in {patience} steps: train.patience_steps=null to train on)" if stopped
+            else " (raise train.steps to train on)"))
         return json.loads((out / "summary.json").read_text()) if (out / "summary.json").exists() else dict(state)
 
     # ---- data: cached frozen features, or images for fine-tuning
@@ -276,16 +282,20 @@ def _train(cfg: DictConfig, out: Path) -> dict:
                     if score > state["best_val"]:
                         state["best_val"], state["best_step"], state["best_accuracy"] = score, step, metrics["val/accuracy"]
                         save_vqa(model, out / CHECKPOINT_NAME, {**vqa_meta, "step": step, "val": metrics})
+                    state["stopped_early"] = patience is not None and step - state["best_step"] >= patience
                 logger.log_metrics(metrics, step=step)
                 bar.set_postfix(loss=f"{metrics['train/loss']:.3f}", val=f"{metrics.get('val/accuracy', float('nan')):.3f}")
-            if step % cfg.checkpoint.interval_steps == 0 or step == steps:
+            if step % cfg.checkpoint.interval_steps == 0 or step == steps or state.get("stopped_early"):
                 ckpt.save(step)
+            if state.get("stopped_early"):
+                break
     finally:
         bar.close()
         logger.close()
     if val_set is None:
         save_vqa(model, out / CHECKPOINT_NAME, {**vqa_meta, "step": steps})
-    summary = {"system": cfg.system, "steps": steps, "train_episodes": len(train_set), "val_episodes": int(val_mask.sum()),
+    summary = {"system": cfg.system, "steps": state["step"], "stopped_early": bool(state.get("stopped_early")),
+               "train_episodes": len(train_set), "val_episodes": int(val_mask.sum()),
                "selected_by": f"val/{cfg.train.select}" if val_set is not None else "last step",
                "best_val_accuracy": state.get("best_accuracy") if val_set is not None else None, "best_step": state["best_step"],
                "feature_seconds": round(feature_seconds, 1), "train_seconds": round(state["train_seconds"], 1),

@@ -251,6 +251,15 @@ def test_train_vqa_keeps_the_checkpoint_its_validation_metric_picks(small_datase
         assert load_vqa(out).meta["step"] == best + 1
     with pytest.raises(ValueError, match="train.select"):
         train_vqa.train(compose_recipe_config("train_vqa", [*args, "train.select=f1", f"out_dir={tmp_path / 'bad'}"]))
+    # patience: a head whose val loss cannot improve (lr 0) stops 2 steps after its first evaluation, keeps that
+    # checkpoint, and a resumed run knows it has finished
+    still = [*args, "train.lr=0", "train.patience_steps=2", f"out_dir={tmp_path / 'still'}"]
+    summary = train_vqa.train(compose_recipe_config("train_vqa", still))
+    assert summary["stopped_early"] and summary["steps"] == 3 and summary["best_step"] == 1
+    assert _steps(tmp_path / "still", "val/loss") == [1, 2, 3] and load_vqa(tmp_path / "still").meta["step"] == 1
+    assert train_vqa.train(compose_recipe_config("train_vqa", [*still, "resume=true"]))["steps"] == 3
+    with pytest.raises(ValueError, match="train.patience_steps"):
+        train_vqa.train(compose_recipe_config("train_vqa", [*args, "train.patience_steps=0", f"out_dir={tmp_path / 'bad'}"]))
 
 
 def test_frame_pack_carries_the_frames_losslessly_and_pretrains_without_the_dataset(small_dataset, answering_root, tmp_path):
