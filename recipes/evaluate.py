@@ -215,10 +215,10 @@ def evaluate(cfg: DictConfig) -> dict:
             if name == "random":
                 continue
             counting = records.get(keys.TYPE_LABEL) == QUESTION_TYPES.index("counting")
-            results["systems"][name]["vs_random"] = {
-                lv: ans.paired_difference(right, records, r_right[r_mask], r_rec[r_mask],
-                                          mask_a=counting & (records.get(keys.LEVEL) == i))
-                for i, lv in enumerate(LEVELS)}
+            for key, paired in (("vs_random", ans.paired_difference), ("vs_random_by_scene", ans.paired_difference_by_scene)):
+                results["systems"][name][key] = {
+                    lv: paired(right, records, r_right[r_mask], r_rec[r_mask], mask_a=counting & (records.get(keys.LEVEL) == i))
+                    for i, lv in enumerate(LEVELS)}
     # intervals that resample scenes: every system's accuracy, and its difference to no manipulation
     for name, (records, right) in data.items():
         results["systems"][name]["accuracy_by_scene"] = ans.accuracy_by_scene(right, records)
@@ -247,10 +247,10 @@ def evaluate(cfg: DictConfig) -> dict:
                          f"to the dataset the VQAs were trained on (e.g. data/mqa)")
     for name, (records, right) in data.items():
         counting = records.get(keys.TYPE_LABEL) == QUESTION_TYPES.index("counting")
-        results["systems"][name]["vs_prior"] = {
-            lv: ans.paired_difference(right, records, ans.prior_right(records, prior), records,
-                                      mask_a=counting & (records.get(keys.LEVEL) == i))
-            for i, lv in enumerate(LEVELS)}
+        for key, paired in (("vs_prior", ans.paired_difference), ("vs_prior_by_scene", ans.paired_difference_by_scene)):
+            results["systems"][name][key] = {
+                lv: paired(right, records, ans.prior_right(records, prior), records, mask_a=counting & (records.get(keys.LEVEL) == i))
+                for i, lv in enumerate(LEVELS)}
     # the answer prior on the test plan's questions (needs no rollout)
     qs = [ds.questions[i] for i in plan]
     answer_index = {a: i for i, a in enumerate(ds.answers)}

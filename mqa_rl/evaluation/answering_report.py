@@ -127,20 +127,23 @@ def policy_markdown(results: dict) -> str:
 
 def by_scene_markdown(results: dict) -> str:
     """COUNTING accuracy per system and level with intervals that resample whole scenes, and the paired
-    difference to no manipulation (the gain manipulation brings to the answer), same intervals."""
-    lines = ["COUNTING accuracy, 95 % intervals resampling whole scenes (cluster bootstrap); system − no manipulation "
-             "paired by question, same intervals; and the same difference for a perfect counter (≥ 20 px) on I_stop", "",
-             "| system | level | accuracy [95 %] | scenes | − no manipulation [95 %] | perfect counter on I_stop − no manipulation [95 %] |",
-             "|---|---|---|---|---|---|"]
+    differences to no manipulation (the gain manipulation brings to the answer), random and the answer prior, same
+    intervals."""
+    lines = ["COUNTING accuracy, 95 % intervals resampling whole scenes (cluster bootstrap); system − no manipulation, "
+             "− random and − the answer prior paired by question, same intervals; and the difference to no manipulation "
+             "for a perfect counter (≥ 20 px) on I_stop", "",
+             "| system | level | accuracy [95 %] | scenes | − no manipulation [95 %] | − random [95 %] | − prior [95 %] "
+             "| perfect counter on I_stop − no manipulation [95 %] |",
+             "|---|---|---|---|---|---|---|---|"]
 
     def cell(diff) -> str:
         return f"{diff[0]:+.3f} [{diff[1]:+.3f}, {diff[2]:+.3f}]" if diff and diff[3] else ""
 
     for name, res in results["systems"].items():
         for lv, (mean, low, high, scenes) in res.get("accuracy_by_scene", {}).items():
-            d = cell(res.get("vs_no_manipulation_by_scene", {}).get(lv))
-            c = cell(res.get("counter_stop_vs_no_manipulation_by_scene", {}).get(lv))
-            lines.append(f"| {name} | {lv} | {mean:.3f} [{low:.3f}, {high:.3f}] | {scenes} | {d} | {c} |")
+            d, r, p, c = (cell(res.get(key, {}).get(lv)) for key in ("vs_no_manipulation_by_scene", "vs_random_by_scene",
+                                                                       "vs_prior_by_scene", "counter_stop_vs_no_manipulation_by_scene"))
+            lines.append(f"| {name} | {lv} | {mean:.3f} [{low:.3f}, {high:.3f}] | {scenes} | {d} | {r} | {p} | {c} |")
     return "\n".join(lines) + "\n"
 
 

@@ -134,6 +134,12 @@ def test_evaluate_writes_table3_and_names_what_is_missing(small_dataset, trained
         rates = [sys_res[s]["counter_last"]["counting"][lv]["accuracy"] for s in ("random", "no_manipulation")]
         assert counter[0] == pytest.approx(rates[0] - rates[1]) and counter[1] <= counter[0] <= counter[2]
     assert "perfect counter on I_stop − no manipulation" in (out / "by_scene.md").read_text()
+    for lv in ("easy", "hard"):        # − random and − the prior by scene: the paired means, with intervals around them
+        by_scene, plain = sys_res["no_manipulation"]["vs_random_by_scene"][lv], sys_res["no_manipulation"]["vs_random"][lv]
+        assert by_scene[0] == pytest.approx(plain[0]) and by_scene[1] <= by_scene[0] <= by_scene[2]
+        by_scene, plain = sys_res["random"]["vs_prior_by_scene"][lv], sys_res["random"]["vs_prior"][lv]
+        assert by_scene[0] == pytest.approx(plain[0]) and by_scene[1] <= by_scene[0] <= by_scene[2]
+    assert "− random [95 %]" in (out / "by_scene.md").read_text() and "− prior [95 %]" in (out / "by_scene.md").read_text()
     assert json.loads((out / "results.json").read_text())["systems"]["random"]["episodes"] == 4
 
 
