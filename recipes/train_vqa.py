@@ -198,7 +198,7 @@ def _train(cfg: DictConfig, out: Path) -> dict:
     refuse_unresumable(out, ckpt.latest() is not None, bool(cfg.resume))
     if ckpt.latest() is not None:
         refuse_changed_config(out / "config.yaml", config, allow=bool(cfg.resume_allow_changes),
-                              free=(*RESUMABLE, "train.steps"))
+                              free=(*RESUMABLE, "train.steps", "train.patience_steps"))   # when to stop, not how to train
         state.pop("select")                            # runs older than train.select kept by accuracy
         path = ckpt.load()
         for group in optim.param_groups:               # a deliberate new phase trains under its own settings
@@ -250,6 +250,7 @@ def _train(cfg: DictConfig, out: Path) -> dict:
                 "encoder": {"weights": cfg.encoder.weights, "frozen": frozen, **encoder_meta},
                 "train_episodes": len(train_set), "val_episodes": int(val_mask.sum())}
 
+    state["stopped_early"] = False                     # a resumed run that stopped early trains on (patience changed)
     bar = tqdm(total=steps, initial=state["step"], unit="step", dynamic_ncols=True, disable=not cfg.logger.progress)
     window_loss, window_acc, window_ground, t_start = [], [], [], time.perf_counter()
     try:

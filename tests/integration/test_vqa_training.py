@@ -258,6 +258,8 @@ def test_train_vqa_keeps_the_checkpoint_its_validation_metric_picks(small_datase
     assert summary["stopped_early"] and summary["steps"] == 3 and summary["best_step"] == 1
     assert _steps(tmp_path / "still", "val/loss") == [1, 2, 3] and load_vqa(tmp_path / "still").meta["step"] == 1
     assert train_vqa.train(compose_recipe_config("train_vqa", [*still, "resume=true"]))["steps"] == 3
+    again = train_vqa.train(compose_recipe_config("train_vqa", [*still, "resume=true", "train.patience_steps=null"]))
+    assert again["steps"] == 6 and not again["stopped_early"]            # when to stop is free on resume: trains on
     with pytest.raises(ValueError, match="train.patience_steps"):
         train_vqa.train(compose_recipe_config("train_vqa", [*args, "train.patience_steps=0", f"out_dir={tmp_path / 'bad'}"]))
 
