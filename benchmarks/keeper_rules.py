@@ -23,6 +23,7 @@ import math
 from pathlib import Path
 
 import torch
+from omegaconf import OmegaConf
 
 from mqa_rl import keys
 from mqa_rl.data.dataset import MQADataset
@@ -30,7 +31,7 @@ from mqa_rl.evaluation.episode_metrics import COUNTING, scene_bootstrap_ci95
 from mqa_rl.evaluation.policy_units import close_envs, unit_env
 from mqa_rl.evaluation.rollouts import run_episodes
 from mqa_rl.files import load_tensors, write_atomic
-from mqa_rl.modules.kept_frame import EXPECTED, FrameKeeper, episode_states, reading_env_options
+from mqa_rl.modules.kept_frame import EXPECTED, FrameKeeper, episode_states, last_argmax, reading_env_options
 from mqa_rl.modules.perceived_count import READING
 from mqa_rl.modules.vote_counting import MAX_COUNT
 from mqa_rl.modules.stop_margin import StopMargin
@@ -45,7 +46,7 @@ def record(a) -> None:
     run_cfg = read_run_config(a.run)
     dataset = a.dataset or run_cfg.dataset
     max_pushes = int(run_cfg.env.max_pushes)
-    reward = dict(run_cfg.reward)
+    reward = OmegaConf.to_container(run_cfg.reward)
     setup = {"dataset": str(dataset), "reward": reward, "split": a.split, "max_pushes": max_pushes, "pusher": "finger",
              "qtypes": list(run_cfg.env.question_types), "push_memory": memory_radius(None, run_cfg.env),
              "frames": reading_env_options({"kept_frame": a.perception}, {"image_size": int(run_cfg.env.image_size)},
@@ -84,8 +85,7 @@ def record(a) -> None:
 
 def shipped(r: torch.Tensor) -> int:
     """FrameKeeper's rule: the largest expected count, the later frame on ties."""
-    e = r[:, EXPECTED]
-    return int(torch.nonzero(e >= e.max()).max())
+    return last_argmax(r[:, EXPECTED])
 
 
 def confirmed(r: torch.Tensor) -> int:
@@ -94,16 +94,14 @@ def confirmed(r: torch.Tensor) -> int:
     c = r[:, COUNT]
     ranked = c.sort(descending=True).values
     top = ranked[1] if len(ranked) > 1 else ranked[0]
-    e = torch.where(c >= top, r[:, EXPECTED], torch.full_like(c, -1.0))
-    return int(torch.nonzero(e >= e.max()).max())
+    return last_argmax(torch.where(c >= top, r[:, EXPECTED], torch.full_like(c, -1.0)))
 
 
 def smoothed(r: torch.Tensor) -> int:
     """The largest expected count averaged with its neighbouring frames' (a push changes a pile a little)."""
     e = r[:, EXPECTED]
     padded = torch.cat([e[:1], e, e[-1:]])
-    s = (padded[:-2] + padded[1:-1] + padded[2:]) / 3
-    return int(torch.nonzero(s >= s.max()).max())
+    return last_argmax((padded[:-2] + padded[1:-1] + padded[2:]) / 3)
 
 
 def second(r: torch.Tensor) -> int:
@@ -116,8 +114,7 @@ def second(r: torch.Tensor) -> int:
 def rounded(r: torch.Tensor) -> int:
     """The largest rounded count, the larger expected count on ties."""
     c, e = r[:, COUNT], r[:, EXPECTED]
-    e = torch.where(c >= c.max(), e, torch.full_like(e, -1.0))
-    return int(torch.nonzero(e >= e.max()).max())
+    return last_argmax(torch.where(c >= c.max(), e, torch.full_like(e, -1.0)))
 
 
 SHIPPED = "shipped: largest expected"

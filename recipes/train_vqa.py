@@ -250,7 +250,7 @@ def _train(cfg: DictConfig, out: Path) -> dict:
                 "encoder": {"weights": cfg.encoder.weights, "frozen": frozen, **encoder_meta},
                 "train_episodes": len(train_set), "val_episodes": int(val_mask.sum())}
 
-    state["stopped_early"] = False                     # a resumed run that stopped early trains on (patience changed)
+    stop = False                                       # no better val/<select> in train.patience_steps
     bar = tqdm(total=steps, initial=state["step"], unit="step", dynamic_ncols=True, disable=not cfg.logger.progress)
     window_loss, window_acc, window_ground, t_start = [], [], [], time.perf_counter()
     try:
@@ -283,19 +283,19 @@ def _train(cfg: DictConfig, out: Path) -> dict:
                     if score > state["best_val"]:
                         state["best_val"], state["best_step"], state["best_accuracy"] = score, step, metrics["val/accuracy"]
                         save_vqa(model, out / CHECKPOINT_NAME, {**vqa_meta, "step": step, "val": metrics})
-                    state["stopped_early"] = patience is not None and step - state["best_step"] >= patience
+                    stop = patience is not None and step - state["best_step"] >= patience
                 logger.log_metrics(metrics, step=step)
                 bar.set_postfix(loss=f"{metrics['train/loss']:.3f}", val=f"{metrics.get('val/accuracy', float('nan')):.3f}")
-            if step % cfg.checkpoint.interval_steps == 0 or step == steps or state.get("stopped_early"):
+            if step % cfg.checkpoint.interval_steps == 0 or step == steps or stop:
                 ckpt.save(step)
-            if state.get("stopped_early"):
+            if stop:
                 break
     finally:
         bar.close()
         logger.close()
     if val_set is None:
         save_vqa(model, out / CHECKPOINT_NAME, {**vqa_meta, "step": steps})
-    summary = {"system": cfg.system, "steps": state["step"], "stopped_early": bool(state.get("stopped_early")),
+    summary = {"system": cfg.system, "steps": state["step"], "stopped_early": stop,
                "train_episodes": len(train_set), "val_episodes": int(val_mask.sum()),
                "selected_by": f"val/{cfg.train.select}" if val_set is not None else "last step",
                "best_val_accuracy": state.get("best_accuracy") if val_set is not None else None, "best_step": state["best_step"],

@@ -59,7 +59,12 @@ class FrameKeeper:
             frames = torch.stack([self.reading.frames(states[i]) for i in todo])
             question = states[0].get(keys.QUESTION)
             expected[todo] = self.reading(frames, question.expand(len(todo), *question.shape))[:, EXPECTED]
-        return max(i for i in range(len(states)) if expected[i] >= expected.max())
+        return last_argmax(expected)
+
+
+def last_argmax(values: torch.Tensor) -> int:
+    """The index of the largest of ``values`` [T], the later one on ties (a later frame has seen more pushes)."""
+    return int(torch.nonzero(values >= values.max()).max())
 
 
 def episode_states(rollout: TensorDictBase) -> list[TensorDictBase]:
