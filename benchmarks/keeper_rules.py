@@ -11,6 +11,8 @@ perception's own rounded count of the asked class is the answer on each rule's f
 
     python benchmarks/keeper_rules.py record --dataset data/mqa_val --level hard --episodes 100 --out runs/keeper64/val
     python benchmarks/keeper_rules.py compare runs/keeper64/val runs/keeper64/val_s124   # levels pooled over folders
+    python benchmarks/keeper_rules.py compare runs/keeper65/val runs/keeper65/val_s124 \
+        --against runs/keeper64/val runs/keeper64/val_s124     # two policies (record --run) on the same questions
 """
 
 from __future__ import annotations
@@ -130,13 +132,47 @@ def readouts(r: torch.Tensor) -> dict[str, float]:
             "mean of the 3 largest expected, rounded": float(torch.round(top3.mean()))}
 
 
+def recorded_levels(folders: list[str]) -> dict[str, list[dict]]:
+    """Per level, the COUNTING episodes of the folders' record files, pooled in the folders' order."""
+    paths = [p for p in (Path(f) / f"{lv}.pt" for lv in ("easy", "medium", "hard") for f in folders) if p.is_file()]
+    out: dict[str, list[dict]] = {}
+    for path in paths:
+        blob = load_tensors(path, what="keeper_rules.py record file", hint="run keeper_rules.py record again")
+        out.setdefault(path.stem, []).extend(e for e in blob["episodes"] if e["counting"])
+    return out
+
+
+def counter_on(episode: dict, frame) -> float:
+    """1 when a perfect counter on the frame ``frame(reading)`` names (None: the best frame of the episode) is right."""
+    seen, targets = episode["seen"], episode["targets"]
+    return float((seen == targets).any()) if frame is None else float(seen[frame(episode["reading"])] == targets)
+
+
+def compare_policies(a) -> None:
+    """Two policies' recordings of the same questions (record with the same dataset, levels, episodes and seeds, the
+    folders in the same order): the perfect counter on the shipped rule's frame, the best and the first, A − B."""
+    ours, theirs = recorded_levels(a.folders), recorded_levels(a.against)
+    common = [level for level in ours if level in theirs]
+    if not common:
+        raise ValueError(f"{a.folders} and --against {a.against} share no recorded level")
+    for level in common:
+        eps, base = ours[level], theirs[level]
+        if len(eps) != len(base) or any((x["scene"], int(x["targets"])) != (y["scene"], int(y["targets"]))
+                                         for x, y in zip(eps, base)):
+            raise ValueError(f"{level}: {a.folders} and --against {a.against} hold different questions; record both "
+                             "with the same --dataset, --episodes and --seed, and list the folders in the same order")
+        scenes = torch.tensor([e["scene"] for e in eps])
+        print(f"\n{level}: {len(eps)} COUNTING episodes over {len(scenes.unique())} scenes; A = {a.folders}, B = {a.against}")
+        for name, frame in (("the shipped rule's frame", shipped), ("the best frame", None), ("the first frame", lambda r: 0)):
+            x, y = (torch.tensor([counter_on(e, frame) for e in side]) for side in (eps, base))
+            mean, low, high, _ = scene_bootstrap_ci95(x - y, scenes)
+            print(f"  perfect counter on {name:26s} A {x.mean():.3f}  B {y.mean():.3f}  A − B {mean:+.3f} [{low:+.3f}, {high:+.3f}]")
+
+
 def compare(a) -> None:
-    levels = [p for p in (Path(f) / f"{lv}.pt" for lv in ("easy", "medium", "hard") for f in a.folders) if p.is_file()]
-    for level in dict.fromkeys(p.stem for p in levels):
-        eps = []
-        for path in (p for p in levels if p.stem == level):
-            blob = load_tensors(path, what="keeper_rules.py record file", hint="run keeper_rules.py record again")
-            eps += [e for e in blob["episodes"] if e["counting"]]
+    if a.against:
+        return compare_policies(a)
+    for level, eps in recorded_levels(a.folders).items():
         scenes = torch.tensor([e["scene"] for e in eps])
         answer = torch.tensor([min(int(e["targets"]), MAX_COUNT) for e in eps])
         frames = {name: [rule(e["reading"]) for e in eps] for name, rule in RULES.items()}
@@ -177,6 +213,8 @@ def main() -> None:
     r.add_argument("--out", required=True, help="a folder: <level>.pt is written there")
     c = sub.add_parser("compare", help="the rules on a folder of recorded levels")
     c.add_argument("folders", nargs="+", help="record --out folders; the same level's episodes are pooled")
+    c.add_argument("--against", nargs="+", default=None,
+                   help="another policy's record folders of the same questions: compare the policies, not the rules")
     a = p.parse_args()
     torch.set_num_threads(1)
     record(a) if a.command == "record" else compare(a)
