@@ -135,6 +135,9 @@ def readouts(r: torch.Tensor) -> dict[str, float]:
 def recorded_levels(folders: list[str]) -> dict[str, list[dict]]:
     """Per level, the COUNTING episodes of the folders' record files, pooled in the folders' order."""
     paths = [p for p in (Path(f) / f"{lv}.pt" for lv in ("easy", "medium", "hard") for f in folders) if p.is_file()]
+    empty = [f for f in folders if not any(p.parent == Path(f) for p in paths)]
+    if empty:
+        raise FileNotFoundError(f"no <level>.pt record file in {empty}: write them with keeper_rules.py record --out")
     out: dict[str, list[dict]] = {}
     for path in paths:
         blob = load_tensors(path, what="keeper_rules.py record file", hint="run keeper_rules.py record again")

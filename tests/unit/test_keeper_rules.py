@@ -51,3 +51,5 @@ def test_recordings_of_other_questions_are_refused(tmp_path):
     out = compare(a, "--against", b)
     assert out.returncode != 0
     assert "hold different questions" in out.stderr and "same --dataset, --episodes and --seed" in out.stderr
+    out = compare(a, "--against", str(tmp_path / "missing"))
+    assert out.returncode != 0 and "no <level>.pt record file in" in out.stderr and "missing" in out.stderr
