@@ -145,10 +145,10 @@ def recorded_levels(folders: list[str]) -> dict[str, list[dict]]:
     return out
 
 
-def counter_on(episode: dict, frame) -> float:
-    """1 when a perfect counter on the frame ``frame(reading)`` names (None: the best frame of the episode) is right."""
+def counter_on(episode: dict, frame: int | None) -> float:
+    """1 when a perfect counter on frame ``frame`` of the episode (None: its best frame) is right."""
     seen, targets = episode["seen"], episode["targets"]
-    return float((seen == targets).any()) if frame is None else float(seen[frame(episode["reading"])] == targets)
+    return float((seen == targets).any()) if frame is None else float(seen[frame] == targets)
 
 
 def compare_policies(a) -> None:
@@ -166,8 +166,10 @@ def compare_policies(a) -> None:
                              "with the same --dataset, --episodes and --seed, and list the folders in the same order")
         scenes = torch.tensor([e["scene"] for e in eps])
         print(f"\n{level}: {len(eps)} COUNTING episodes over {len(scenes.unique())} scenes; A = {a.folders}, B = {a.against}")
-        for name, frame in (("the shipped rule's frame", shipped), ("the best frame", None), ("the first frame", lambda r: 0)):
-            x, y = (torch.tensor([counter_on(e, frame) for e in side]) for side in (eps, base))
+        for name, frame in (("the shipped rule's frame", shipped), ("the best frame", None),
+                            ("the first frame", RULES["first (no manipulation)"])):
+            x, y = (torch.tensor([counter_on(e, None if frame is None else frame(e["reading"])) for e in side])
+                    for side in (eps, base))
             mean, low, high, _ = scene_bootstrap_ci95(x - y, scenes)
             print(f"  perfect counter on {name:26s} A {x.mean():.3f}  B {y.mean():.3f}  A − B {mean:+.3f} [{low:+.3f}, {high:+.3f}]")
 
@@ -179,15 +181,14 @@ def compare(a) -> None:
         scenes = torch.tensor([e["scene"] for e in eps])
         answer = torch.tensor([min(int(e["targets"]), MAX_COUNT) for e in eps])
         frames = {name: [rule(e["reading"]) for e in eps] for name, rule in RULES.items()}
-        counter = {name: torch.tensor([float(e["seen"][i] == e["targets"]) for e, i in zip(eps, kept)])
-                   for name, kept in frames.items()}
+        counter = {name: torch.tensor([counter_on(e, i) for e, i in zip(eps, kept)]) for name, kept in frames.items()}
         read = {name: torch.tensor([float(min(int(e["reading"][i, COUNT]), MAX_COUNT) == t) for e, i, t in zip(eps, kept, answer)])
                 for name, kept in frames.items()}
         for e, t in zip(eps, answer):
             for name, value in readouts(e["reading"]).items():
                 read.setdefault(name, []).append(float(min(int(value), MAX_COUNT) == t))
         read = {k: torch.as_tensor(v) for k, v in read.items()}
-        best = torch.tensor([float((e["seen"] == e["targets"]).any()) for e in eps])
+        best = torch.tensor([counter_on(e, None) for e in eps])
         print(f"\n{level}: {len(eps)} COUNTING episodes over {len(scenes.unique())} scenes; a perfect counter on the best "
               f"frame of the episode {best.mean():.3f}\n  {'rule':40s} perfect counter on its frame − shipped [95 % by scene]"
               f" | perception's rounded count = answer − shipped")
