@@ -103,8 +103,8 @@ class DihedralAugment(Transform):
     """Replay-buffer transform: every sampled transition under a random symmetry of the square
     (``mirror_first`` numbering).
 
-    Both observations (``root`` and ``"next"``), their action masks, the action and the visible-target
-    cells (if stored) are turned alike;
+    Both observations (``root`` and ``"next"``, their perceived classes if stored), their action masks, the action and
+    the visible-target cells (if stored) are turned alike;
     reward, done flags, question and the sample's buffer ``index`` (for priority updates) stay.
     """
 
@@ -123,9 +123,10 @@ class DihedralAugment(Transform):
             for prefix in ((), ("next",)):
                 if prefix and "next" not in flat.keys():         # demonstrations: states without successors
                     continue
-                for key in IMAGE_KEYS:
+                for key in (*IMAGE_KEYS, keys.PERCEIVED_CLASSES):       # the perceived classes: a grid map, if stored
                     name = (*prefix, key)
-                    flat.get(name)[idx] = transform_images(flat.get(name)[idx], k, mirror)
+                    if flat.get(name, None) is not None:
+                        flat.get(name)[idx] = transform_images(flat.get(name)[idx], k, mirror)
                 mask = (*prefix, keys.ACTION_MASK)
                 flat.get(mask)[idx] = transform_push_map(flat.get(mask)[idx], k, mirror)
             flat.get(keys.ACTION)[idx] = transform_action(flat.get(keys.ACTION)[idx], k, mirror)

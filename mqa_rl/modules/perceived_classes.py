@@ -1,0 +1,74 @@
+"""PerceivedClasses: the counting perception's class map on the push grid, as the push policy's recognition.
+
+Why: the students' recognition (a light trunk and a 1×1 class head learnt on the renders of the 70 training scenes,
+``checkpoints/recognition``) gives object cells their class 0.76-0.78 of the time on piles it never saw, against
+0.93-0.96 for the counting perception (issue 39's U-Net, learnt on 900 fresh piles), and the geometric push branch
+decides from the question's target map alone (docs/policy.md, "The students' recognition on new piles").
+
+A TensorDict module that writes ``keys.PERCEIVED_CLASSES`` (float32 [1 + classes, 28, 28]: the perception's class
+probabilities averaged over each push-grid cell's pixels) from ``keys.RGB``, unless the tensordict carries them
+already (a replay sample, a demonstration set filled once): placed before the Q-network's actor it reads each state
+once, when the policy acts. Frozen: it is part of the policy's weights, never trained.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import torch
+import torch.nn.functional as F
+from tensordict import TensorDictBase
+from tensordict.nn import TensorDictModuleBase
+
+from mqa_rl import keys
+from mqa_rl.envs import actions
+from mqa_rl.modules.perception import CountingPerception, load_perception
+
+CHUNK = 8              # frames per perception pass (a 448-px pass holds ~0.2 GB of activations a frame)
+
+
+class PerceivedClasses(TensorDictModuleBase):
+    """``td[RGB]`` uint8 [*B, 3, H, W] → ``td[PERCEIVED_CLASSES]`` float32 [*B, 1 + classes, 28, 28]."""
+
+    def __init__(self, perception: CountingPerception):
+        super().__init__()
+        self.in_keys, self.out_keys = [keys.RGB], [keys.PERCEIVED_CLASSES]
+        self.perception = perception.eval()
+        for p in self.perception.parameters():
+            p.requires_grad_(False)
+
+    @classmethod
+    def from_file(cls, path: str | Path, num_classes: int) -> "PerceivedClasses":
+        """The perception at ``path``; ValueError when it tells another number of classes than the dataset's."""
+        model, _ = load_perception(path)
+        if model.num_classes != 1 + num_classes:
+            raise ValueError(f"{path} tells {model.num_classes - 1} object classes and the dataset has {num_classes}: "
+                             f"model.perceived_classes needs a counting perception of this dataset's classes")
+        return cls(model)
+
+    def train(self, mode: bool = True) -> "PerceivedClasses":
+        super().train(mode)
+        self.perception.eval()          # frozen: batch statistics never move
+        return self
+
+    @torch.no_grad()
+    def read(self, rgb: torch.Tensor) -> torch.Tensor:
+        """uint8 rgb [*B, 3, H, W] → float32 [*B, 1 + classes, 28, 28]."""
+        flat = rgb.reshape(-1, *rgb.shape[-3:])
+        out = [F.adaptive_avg_pool2d(self.perception.predict(flat[i:i + CHUNK].to(torch.uint8))[0].float(), actions.GRID)
+               for i in range(0, flat.shape[0], CHUNK)]
+        probs = torch.cat(out) if out else flat.new_zeros((0, self.perception.num_classes, actions.GRID, actions.GRID),
+                                                          dtype=torch.float32)
+        return probs.reshape(*rgb.shape[:-3], *probs.shape[1:])
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        if keys.PERCEIVED_CLASSES not in tensordict.keys():
+            tensordict.set(keys.PERCEIVED_CLASSES, self.read(tensordict.get(keys.RGB)))
+        return tensordict
+
+    def fill(self, tensordict: TensorDictBase) -> TensorDictBase:
+        """``forward`` on the roots and, where there are, the ``"next"`` states of stored transitions."""
+        self(tensordict)
+        if "next" in tensordict.keys() and keys.RGB in tensordict.get("next").keys():
+            self(tensordict.get("next"))
+        return tensordict
