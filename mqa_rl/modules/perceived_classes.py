@@ -2,7 +2,7 @@
 
 Why: the students' recognition (a light trunk and a 1×1 class head learnt on the renders of the 70 training scenes,
 ``checkpoints/recognition``) gives object cells their class 0.76-0.78 of the time on piles it never saw, against
-0.93-0.96 for the counting perception (issue 39's U-Net, learnt on 900 fresh piles), and the geometric push branch
+0.93-0.95 for the counting perception (issue 39's U-Net, learnt on 900 fresh piles), and the geometric push branch
 decides from the question's target map alone (docs/policy.md, "The students' recognition on new piles").
 
 A TensorDict module that writes ``keys.PERCEIVED_CLASSES`` (float32 [1 + classes, 28, 28]: the perception's class

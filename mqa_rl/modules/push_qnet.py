@@ -36,7 +36,7 @@ logit(t), so the auxiliary target-map loss (``mqa_rl.losses.target_map``) trains
 (``keys.PERCEIVED_CLASSES``, the counting perception's class map pooled to the push grid, written by
 ``mqa_rl.modules.perceived_classes.PerceivedClasses``) instead of the class head, which is then unused. On piles
 it never saw the class head tells object cells' classes apart 0.76-0.78 of the time, the counting perception
-0.93-0.96 (docs/policy.md, "The students' recognition on new piles").
+0.93-0.95 (docs/policy.md, "The students' recognition on new piles").
 
 ``rotated_head`` (VPG's rotation sharing, ``mqa_rl.modules.rotated_head``): one push head scores "push
 right" on the state rotated for each of the 8 directions, so every demonstration and reward teaches all
