@@ -11,7 +11,6 @@ of the env's action spec (``EGreedyModule`` writes the mask into its spec).
 from __future__ import annotations
 
 from collections.abc import Mapping
-
 from pathlib import Path
 
 from tensordict import TensorDictBase
