@@ -82,8 +82,7 @@ def main() -> None:
             truth = torch.from_numpy(env.class_cells())
             rows.append((scene.difficulty, i, {run: scores(read(td[keys.RGB]), truth) for run, read in readers.items()}))
             if k < a.pushes:
-                allowed = td[keys.ACTION_MASK][: actions.NUM_PUSHES].float()
-                td = env.step(td.set(keys.ACTION, torch.multinomial(allowed, 1, generator=g).squeeze(0)))["next"]
+                td = env.step(td.set(keys.ACTION, actions.random_push(td[keys.ACTION_MASK], g)))["next"]
     env.close()
     if not rows:
         p.error(f"{a.dataset} has no {a.split} scenes")

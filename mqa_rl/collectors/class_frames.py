@@ -41,8 +41,6 @@ def collect_class_frames(env, frames: int, *, max_pushes: int, seed: int = 0, pr
             bar.update(1)
             if len(out) == frames or k == pushes:
                 break
-            allowed = td[keys.ACTION_MASK][: actions.NUM_PUSHES].float()
-            push = torch.multinomial(allowed, 1, generator=generator).squeeze(0)
-            td = env.step(td.set(keys.ACTION, push))["next"]
+            td = env.step(td.set(keys.ACTION, actions.random_push(td[keys.ACTION_MASK], generator)))["next"]
     bar.close()
     return torch.stack(out)

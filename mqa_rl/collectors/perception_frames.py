@@ -95,9 +95,7 @@ def pile_episode(env: SapienBinEnv, scene_index: int, question_id: str, *, pushe
     td = env.reset(question_id=question_id)
     frames = [_frame(env, td, size)]
     for _ in range(pushes):
-        allowed = td[keys.ACTION_MASK][: actions.NUM_PUSHES].float()
-        push = torch.multinomial(allowed, 1, generator=rng).squeeze(0)
-        td = env.step(td.set(keys.ACTION, push))["next"]
+        td = env.step(td.set(keys.ACTION, actions.random_push(td[keys.ACTION_MASK], rng)))["next"]
         frames.append(_frame(env, td, size))
     classes = torch.zeros(MAX_OBJECTS, dtype=torch.int64)
     classes[:len(scene.objects)] = torch.tensor([1 + ds.classes.index(o.class_name) for o in scene.objects])

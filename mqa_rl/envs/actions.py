@@ -74,3 +74,9 @@ def start_points_mask(bin_spec, start: np.ndarray, margin: float = 0.005) -> tor
     """``push_start_mask`` from already computed start points [GRID, GRID, 3]."""
     inside = torch.from_numpy(bin_spec.inside(start, margin=margin).reshape(-1))
     return torch.cat([inside.repeat(DIRECTIONS), torch.ones(1, dtype=torch.bool)])
+
+
+def random_push(action_mask: torch.Tensor, generator: torch.Generator | None = None) -> torch.Tensor:
+    """A push drawn uniformly among those an observation's ``action_mask`` [NUM_ACTIONS] allows (stop excluded): the
+    random pushes that disturb piles for the frame collectors and the benchmarks."""
+    return torch.multinomial(action_mask[:NUM_PUSHES].float(), 1, generator=generator).squeeze(0)
