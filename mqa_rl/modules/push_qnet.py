@@ -189,14 +189,16 @@ class PushQNet(nn.Module):
             raise RuntimeError("this PushQNet has no class head: build it with class_map=True")
         return self.class_head(self._rgb_features(rgb))
 
-    def _class_probs(self, fr: torch.Tensor, classes: torch.Tensor | None) -> torch.Tensor:
-        """p [B, 1 + classes, 28, 28]: the observation's perceived classes (``perceived_classes``), else the class head's."""
+    def _class_probs(self, rgb_features, classes: torch.Tensor | None) -> torch.Tensor:
+        """p [B, 1 + classes, 28, 28]: the observation's perceived classes (``perceived_classes``), else the class head's
+        on the rgb trunk's features (``rgb_features``: the features, or a callable computing them only when needed)."""
         if not self.perceived_classes:
+            fr = rgb_features() if callable(rgb_features) else rgb_features
             return torch.softmax(self.class_head(fr), 1)
         if classes is None:
             raise ValueError(f"this PushQNet reads the perceived classes ({keys.PERCEIVED_CLASSES!r}): pass them beside "
                              f"rgb, depth and question (PerceivedClasses writes them into the observation)")
-        return classes.reshape(-1, *classes.shape[-3:]).to(fr.dtype)
+        return classes.reshape(-1, *classes.shape[-3:]).to(self.question_classes.weight.dtype)
 
     def _targets(self, probs: torch.Tensor, qf: torch.Tensor) -> torch.Tensor:
         """t = Σ_c softmax(question)_c · p_c, [B, 1, 28, 28]."""
@@ -241,7 +243,7 @@ class PushQNet(nn.Module):
         """``geometry`` from the observation: [B, 5, 28, 28] (``class_map``; the learned stop reads it)."""
         if self.class_head is None:
             raise RuntimeError("this PushQNet has no class head: build it with class_map=True")
-        probs = self._class_probs(self._rgb_features(rgb), classes)
+        probs = self._class_probs(lambda: self._rgb_features(rgb), classes)      # no trunk pass for perceived classes
         return self.geometry(probs, depth, self._targets(probs, self.question(question)))
 
     def q_map(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor, classes=None) -> torch.Tensor:
@@ -257,7 +259,7 @@ class PushQNet(nn.Module):
         (rgb, the perceived classes and question only: the depth trunk plays no part)."""
         if self.class_head is None:
             raise RuntimeError("this PushQNet has no target map: build it with class_map=True")
-        probs = self._class_probs(self._rgb_features(rgb), classes)
+        probs = self._class_probs(lambda: self._rgb_features(rgb), classes)
         targets = self._targets(probs, self.question(question))
         return torch.logit(targets.clamp(1e-4, 1 - 1e-4)).squeeze(1)
 
