@@ -67,8 +67,22 @@ class PerceivedClasses(TensorDictModuleBase):
         return tensordict
 
     def fill(self, tensordict: TensorDictBase) -> TensorDictBase:
-        """``forward`` on the roots and, where there are, the ``"next"`` states of stored transitions."""
+        """``forward`` on the roots and, where there are, the ``"next"`` states of stored transitions [N]. A successor that
+        is the following transition's root (the same frame: a trajectory goes on) takes that root's reading: the
+        collector's batches are trajectories, so most successors are read once, not twice."""
         self(tensordict)
-        if "next" in tensordict.keys() and keys.RGB in tensordict.get("next").keys():
-            self(tensordict.get("next"))
+        after = tensordict.get("next", None)
+        if after is None or keys.RGB not in after.keys() or keys.PERCEIVED_CLASSES in after.keys():
+            return tensordict
+        if tensordict.batch_dims != 1:
+            self(after)
+            return tensordict
+        rgb, next_rgb, read = tensordict.get(keys.RGB), after.get(keys.RGB), tensordict.get(keys.PERCEIVED_CLASSES)
+        same = torch.zeros(len(tensordict), dtype=torch.bool)
+        same[:-1] = (next_rgb[:-1] == rgb[1:]).flatten(1).all(1)
+        out = torch.empty_like(read)
+        out[:-1][same[:-1]] = read[1:][same[:-1]]
+        if (~same).any():
+            out[~same] = self.read(next_rgb[~same])
+        after.set(keys.PERCEIVED_CLASSES, out)
         return tensordict

@@ -97,3 +97,20 @@ def test_the_replay_keeps_both_states_perceived_classes_and_the_augment_turns_th
         k, mirror = mirror_first(pick)
         for key in (keys.PERCEIVED_CLASSES, ("next", keys.PERCEIVED_CLASSES)):
             assert torch.equal(turned.get(key)[i], transform_images(stored.get(key)[i], k, mirror))
+
+
+def test_a_successor_that_is_the_next_transitions_root_takes_its_reading_and_is_not_read_again(tmp_path):
+    actor, _, _ = _actor(tmp_path)
+    perceiver = perceiver_of(actor)
+    roots = _states(batch=3)
+    after = _states(batch=3, seed=1)
+    after.get(keys.RGB)[0] = roots.get(keys.RGB)[1]                    # transition 0 leads to transition 1's state
+    data = roots.clone().set("next", after)
+    actor(data)                                                          # the acting policy reads the roots
+    frames_read = []
+    predict = perceiver.perception.predict
+    perceiver.perception.predict = lambda rgb, *a: (frames_read.append(len(rgb)), predict(rgb, *a))[1]
+    perceiver.fill(data)
+    assert sum(frames_read) == 2                                         # successors 1 and 2; 0 reused
+    expected = PerceivedClasses(perceiver.perception).read(after.get(keys.RGB))
+    torch.testing.assert_close(data.get(("next", keys.PERCEIVED_CLASSES)), expected, atol=1e-5, rtol=0)
