@@ -248,14 +248,12 @@ def _train(cfg: DictConfig, out: Path, created: bool) -> dict:
     aux_weight = float(cfg.loss.get("target_map_weight", 0.0))
     aux_loss = TargetMapLoss(net, aux_weight) if aux_weight > 0 else None
     demo_cfg = cfg.get("demos") or {}
-    demos = load_demonstrations(demo_cfg["path"], cfg.dataset) if demo_cfg.get("path") else None
     perceiver = perceiver_of(actor)                 # the perceived classes' reader, when the network reads them
+    t0 = time.perf_counter()                        # their perceived classes: read once, kept beside them
+    demos = load_demonstrations(demo_cfg["path"], cfg.dataset, perceiver) if demo_cfg.get("path") else None
     if demos is not None:
-        print(f"demonstrations: {len(demos)} states from {demo_cfg['path']}")
-        if perceiver is not None:                   # read once: every update samples from them
-            t0 = time.perf_counter()
-            perceiver(demos)
-            print(f"  their perceived classes read in {time.perf_counter() - t0:.0f} s")
+        print(f"demonstrations: {len(demos)} states from {demo_cfg['path']} ({time.perf_counter() - t0:.0f} s"
+              f"{' with their perceived classes' if perceiver is not None else ''})")
     demo_loss = (DemonstrationLoss(net, demo_cfg.get("loss", "margin"), demo_cfg["margin"], demo_cfg["weight"],
                                    demo_cfg.get("smooth_cells", 0.0), demo_cfg.get("stop_margin", 0.0),
                                    demo_cfg.get("direction_weight", 0.0))

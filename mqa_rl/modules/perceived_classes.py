@@ -8,11 +8,14 @@ decides from the question's target map alone (docs/policy.md, "The students' rec
 A TensorDict module that writes ``keys.PERCEIVED_CLASSES`` (float32 [1 + classes, 28, 28]: the perception's class
 probabilities averaged over each push-grid cell's pixels) from ``keys.RGB``, unless the tensordict carries them
 already (a replay sample, a demonstration set filled once): placed before the Q-network's actor it reads each state
-once, when the policy acts. Frozen: it is part of the policy's weights, never trained.
+once, when the policy acts. Frozen: it is part of the policy's weights, never trained. A demonstration folder's
+readings are kept beside it (``kept``): every phase of a chain trains on the same demonstrations, which never change
+once collected (``collect_demonstrations.py`` refuses a folder that holds some).
 """
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import torch
@@ -22,6 +25,8 @@ from tensordict.nn import TensorDictModuleBase
 
 from mqa_rl import keys
 from mqa_rl.envs import actions
+from mqa_rl.files import load_tensors, write_atomic
+from mqa_rl.modules.perceived_count import file_sha256
 from mqa_rl.modules.perception import CountingPerception, load_perception
 
 CHUNK = 8              # frames per perception pass (a 448-px pass holds ~0.2 GB of activations a frame)
@@ -30,8 +35,9 @@ CHUNK = 8              # frames per perception pass (a 448-px pass holds ~0.2 GB
 class PerceivedClasses(TensorDictModuleBase):
     """``td[RGB]`` uint8 [*B, 3, H, W] → ``td[PERCEIVED_CLASSES]`` float32 [*B, 1 + classes, 28, 28]."""
 
-    def __init__(self, perception: CountingPerception):
+    def __init__(self, perception: CountingPerception, sha256: str | None = None):
         super().__init__()
+        self.sha256 = sha256                # the perception's file, which names the readings ``kept`` writes
         self.in_keys, self.out_keys = [keys.RGB], [keys.PERCEIVED_CLASSES]
         self.perception = perception.eval()
         for p in self.perception.parameters():
@@ -44,7 +50,7 @@ class PerceivedClasses(TensorDictModuleBase):
         if model.num_classes != 1 + num_classes:
             raise ValueError(f"{path} tells {model.num_classes - 1} object classes and the dataset has {num_classes}: "
                              f"model.perceived_classes needs a counting perception of this dataset's classes")
-        return cls(model)
+        return cls(model, file_sha256(path))
 
     def train(self, mode: bool = True) -> "PerceivedClasses":
         super().train(mode)
@@ -85,4 +91,29 @@ class PerceivedClasses(TensorDictModuleBase):
         if (~same).any():
             out[~same] = self.read(next_rgb[~same])
         after.set(keys.PERCEIVED_CLASSES, out)
+        return tensordict
+
+    def kept(self, tensordict: TensorDictBase, folder: str | Path) -> TensorDictBase:
+        """``forward`` on a stored set [N] (a demonstration folder's), its readings kept in ``folder`` as
+        ``perceived_classes-<the perception's SHA-256, 16 digits>.pt`` and read from there the next time; a kept
+        file of another length or unreadable is read again and replaced; a folder that cannot be written only
+        costs the reading."""
+        if self.sha256 is None or keys.PERCEIVED_CLASSES in tensordict.keys():
+            return self(tensordict)
+        path = Path(folder) / f"perceived_classes-{self.sha256[:16]}.pt"
+        shape = (len(tensordict), self.perception.num_classes, actions.GRID, actions.GRID)
+        if path.exists():
+            try:
+                readings = load_tensors(path, what="file of perceived classes", hint="it is read again")
+            except ValueError:
+                readings = None
+            if isinstance(readings, torch.Tensor) and tuple(readings.shape) == shape:
+                return tensordict.set(keys.PERCEIVED_CLASSES, readings.float())
+        self(tensordict)
+        buffer = io.BytesIO()
+        torch.save(tensordict.get(keys.PERCEIVED_CLASSES), buffer)
+        try:
+            write_atomic(path, buffer.getvalue())
+        except OSError as error:
+            print(f"  the perceived classes are not kept in {folder} ({error}): the next training reads them again")
         return tensordict

@@ -114,3 +114,22 @@ def test_a_successor_that_is_the_next_transitions_root_takes_its_reading_and_is_
     assert sum(frames_read) == 2                                         # successors 1 and 2; 0 reused
     expected = PerceivedClasses(perceiver.perception).read(after.get(keys.RGB))
     torch.testing.assert_close(data.get(("next", keys.PERCEIVED_CLASSES)), expected, atol=1e-5, rtol=0)
+
+
+def test_a_demonstration_folders_readings_are_kept_beside_it_and_read_from_there_the_next_time(tmp_path):
+    actor, _, _ = _actor(tmp_path)
+    perceiver = perceiver_of(actor)
+    frames_read = []
+    predict = perceiver.perception.predict
+    perceiver.perception.predict = lambda rgb, *a: (frames_read.append(len(rgb)), predict(rgb, *a))[1]
+    folder = tmp_path / "demos"
+    first = perceiver.kept(_states(batch=3), folder)
+    kept = sorted(folder.glob("perceived_classes-*.pt"))
+    assert len(kept) == 1 and sum(frames_read) == 3
+    again = perceiver.kept(_states(batch=3), folder)                   # the next phase of a chain: not read again
+    assert sum(frames_read) == 3
+    assert torch.equal(again.get(keys.PERCEIVED_CLASSES), first.get(keys.PERCEIVED_CLASSES))
+    kept[0].write_bytes(b"half a file")                                 # unreadable, or of another length: read again
+    perceiver.kept(_states(batch=3), folder)
+    perceiver.kept(_states(batch=4), folder)
+    assert sum(frames_read) == 3 + 3 + 4
