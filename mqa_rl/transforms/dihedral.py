@@ -32,7 +32,8 @@ from torchrl.envs import Transform
 from mqa_rl import keys
 from mqa_rl.envs import actions
 
-IMAGE_KEYS = (keys.RGB, keys.DEPTH)
+# what turns like the images: the frames and, where stored, the grid maps (perceived classes, the visible-target cells)
+TURNED_MAPS = (keys.RGB, keys.DEPTH, keys.PERCEIVED_CLASSES, keys.TARGET_CELLS)
 DIHEDRAL = 8            # the number of symmetries
 
 
@@ -123,15 +124,13 @@ class DihedralAugment(Transform):
             for prefix in ((), ("next",)):
                 if prefix and "next" not in flat.keys():         # demonstrations: states without successors
                     continue
-                for key in (*IMAGE_KEYS, keys.PERCEIVED_CLASSES):       # the perceived classes: a grid map, if stored
+                for key in TURNED_MAPS:
                     name = (*prefix, key)
                     if flat.get(name, None) is not None:
                         flat.get(name)[idx] = transform_images(flat.get(name)[idx], k, mirror)
                 mask = (*prefix, keys.ACTION_MASK)
                 flat.get(mask)[idx] = transform_push_map(flat.get(mask)[idx], k, mirror)
             flat.get(keys.ACTION)[idx] = transform_action(flat.get(keys.ACTION)[idx], k, mirror)
-            if keys.TARGET_CELLS in flat.keys(True):                 # a grid map: turns like the images
-                flat.get(keys.TARGET_CELLS)[idx] = transform_images(flat.get(keys.TARGET_CELLS)[idx], k, mirror)
         return flat.reshape(tensordict.shape)
 
     def _call(self, next_tensordict: TensorDictBase) -> TensorDictBase:   # not an env transform
