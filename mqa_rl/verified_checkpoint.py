@@ -44,6 +44,17 @@ def _digests(components_dir: Path, skip: Path, component: str | None = None) -> 
     return out
 
 
+def component_digest(checkpoint_dir: Path, component: str) -> str:
+    """One SHA-256 for a component's files as the checkpoint's integrity record lists them (``"policy"``: the
+    weights): what tells two evaluations they ran the same policy, without hashing the files again."""
+    found = list((Path(checkpoint_dir) / "components").glob(f"*{INTEGRITY}/sha256.json"))
+    if not found:
+        raise ValueError(f"{checkpoint_dir}: no integrity record (sha256.json): not a complete mqa_rl training checkpoint")
+    record = json.loads(found[0].read_text())
+    listed = {k: v for k, v in sorted(record.items()) if k.split("/", 1)[0].endswith(f"-{component}")}
+    return hashlib.sha256(json.dumps(listed).encode()).hexdigest()
+
+
 class IntegrityAdapter(CheckpointAdapter):
     """Writes the SHA-256 of the files of the components saved before it (they sort first)."""
 

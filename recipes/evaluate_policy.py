@@ -16,7 +16,9 @@ perfect counter reads the COUNTING answer from I_stop (``counter_stop``) or from
 (``scene_low`` / ``scene_high``, shown in results.md); and greedy − each other policy (random, no_manipulation, ...)
 paired by question. Writes
 ``results.json``, ``results.md``, the per-episode metrics (``episodes/<policy>_<level>.pt``) and
-videos (Q maps beside the frames) to ``out_dir``. ``baseline_from=<an earlier out_dir>`` reuses that
+videos (Q maps beside the frames) to ``out_dir``, each policy and level as soon as it finishes: run again
+with the same ``out_dir``, an evaluation resumes, keeping the finished units that were run on the same questions
+(greedy's also with the same weights, stop and kept frame). ``baseline_from=<an earlier out_dir>`` reuses that
 evaluation's random episodes when they were run on the same questions (same dataset, split, seed,
 episodes, push limit, question types, pusher): the χ metrics carry over, the reward only if the
 reward config matches too (else it is left out).
@@ -39,8 +41,10 @@ from mqa_rl.evaluation.episode_metrics import mean_ci95, scene_bootstrap_ci95
 from mqa_rl.evaluation.policy_units import POLICIES, close_envs, run_units
 from mqa_rl.files import load_tensors, write_atomic
 from mqa_rl.modules.kept_frame import reading_env_options
-from mqa_rl.modules.trained_policy import read_run_config
+from mqa_rl.modules.perceived_count import file_sha256
+from mqa_rl.modules.trained_policy import newest_run_checkpoint, read_run_config
 from mqa_rl.transforms.push_memory import memory_radius
+from mqa_rl.verified_checkpoint import component_digest
 
 REPORTED = ("reward", "pushes", "final_simple", "chi_end", "chi_change", "hidden_end", "into_view", "out_of_view",
             "countable_gain", "counter_stop", "counter_either", "idle_pushes", "stopped")
@@ -53,6 +57,18 @@ def episodes_meta(cfg: DictConfig, dataset, level: str, qtypes, max_pushes: int,
     return {"dataset": str(Path(dataset).resolve()), "split": cfg.split, "seed": int(cfg.seed), "level": level,
             "episodes": int(cfg.episodes_per_level), "max_pushes": max_pushes, "pusher": cfg.pusher,
             "question_types": list(qtypes) if qtypes else None, "reward": reward, "push_memory": push_memory}
+
+
+def greedy_identity(cfg: DictConfig) -> dict | None:
+    """What makes two evaluations' greedy episodes the same policy: its weights (their digest in the checkpoint's
+    integrity record), its stopping rule and the frame it answers from (None when the run has no checkpoint yet)."""
+    checkpoint = Path(cfg.checkpoint) if cfg.checkpoint else newest_run_checkpoint(cfg.run)
+    if checkpoint is None:
+        return None
+    stop = Path(cfg.stop_critic) / "stop_critic.pt" if cfg.stop_critic else None
+    return {"weights": component_digest(checkpoint, "policy"), "stop_margin": cfg.stop_margin,
+            "stop_critic": file_sha256(stop) if stop and stop.is_file() else cfg.stop_critic,
+            "kept_frame": file_sha256(cfg.kept_frame) if cfg.kept_frame and Path(cfg.kept_frame).is_file() else cfg.kept_frame}
 
 
 def shown(stat: dict, sep: str = " ± ") -> str:
@@ -75,12 +91,13 @@ def statistics(values: torch.Tensor, scenes: torch.Tensor | None) -> dict:
     return out
 
 
-def reuse_baseline(folder, name: str, meta: dict) -> dict[str, torch.Tensor] | None:
-    """The per-episode metrics of policy ``name`` from an earlier evaluation, if on the same questions."""
+def reuse_episodes(folder, name: str, meta: dict) -> dict[str, torch.Tensor] | None:
+    """The per-episode metrics of policy ``name`` from an earlier evaluation (or this one, killed), if on the same
+    questions."""
     path = Path(folder) / "episodes" / f"{name}_{meta['level']}.pt"
     if not path.is_file():
         return None
-    saved = load_tensors(path, what="baseline episodes file", hint="delete it (or give another baseline_from=) to evaluate again")
+    saved = load_tensors(path, what="baseline episodes file", hint="delete it to evaluate again")
     # the reward is checked below; the paper's random never reads the action mask, so PushMemory leaves it alone
     ignored = ("reward", "push_memory") if name == "random" else ("reward",)
     same = {k: v for k, v in meta.items() if k not in ignored}
@@ -128,18 +145,21 @@ def main(cfg: DictConfig) -> None:
     reported = (*REPORTED, *KEPT_REPORTED) if cfg.kept_frame else REPORTED
     metrics: dict = {}
     units = []
-    metas = {level: episodes_meta(cfg, dataset, level, qtypes, max_pushes, reward, push_memory) for level in cfg.difficulties}
-    for level, meta in metas.items():
-        for name in cfg.policies:
-            reused = reuse_baseline(cfg.baseline_from, name, meta) if cfg.baseline_from and name != "greedy" else None
-            if reused is not None:
-                metrics[level, name] = reused
-            else:
-                units.append((level, name))
+    identity = greedy_identity(cfg) if "greedy" in cfg.policies else None
+    metas = {(level, name): episodes_meta(cfg, dataset, level, qtypes, max_pushes, reward, push_memory)
+             | ({"policy": identity} if name == "greedy" else {}) for level in cfg.difficulties for name in cfg.policies}
+    for (level, name), meta in metas.items():
+        reused = reuse_episodes(out, name, meta)        # a killed evaluation resumes
+        if reused is None and cfg.baseline_from and name != "greedy":
+            reused = reuse_episodes(cfg.baseline_from, name, meta)
+        if reused is not None:
+            metrics[level, name] = reused
+        else:
+            units.append((level, name))
     try:
         if units:
             for unit, result in run_units(setup, units, cfg.backend, cfg.ray.address, int(cfg.workers)):
-                metrics[unit] = record_unit(out, metas[unit[0]], cfg.video_format, unit, result)
+                metrics[unit] = record_unit(out, metas[unit], cfg.video_format, unit, result)
     finally:
         close_envs()
     results, lines = {}, []

@@ -60,6 +60,15 @@ def test_tiny_training_run_evaluation_and_curves(small_dataset_dir, tmp_path):
     res = json.loads((ev / "results.json").read_text())
     assert res["easy"]["greedy"]["chi_end"]["n"] <= 2 and "greedy-random" in res["easy"]
     assert (ev / "videos" / "easy_0.gif").stat().st_size > 0
+    # the same evaluation again (as after a kill) resumes: every finished unit is kept, greedy's too
+    EVAL = [str(ROOT / "recipes" / "evaluate_policy.py"), f"run={run}", "episodes_per_level=2", "difficulties=[easy]",
+            "policies=[greedy,random]", "video_episodes=1", "video_format=gif", f"out_dir={ev}"]
+    resumed = _run(*EVAL, cwd=tmp_path)
+    assert "greedy: reused" in resumed.stdout and "random: reused" in resumed.stdout
+    assert json.loads((ev / "results.json").read_text()) == res
+    # another stopping rule is another greedy policy: its episodes run again, random's are kept
+    restopped = _run(*EVAL, "stop_margin=0.5", cwd=tmp_path)
+    assert "greedy: reused" not in restopped.stdout and "random: reused" in restopped.stdout
     # a second evaluation reuses the first one's random episodes (same questions) instead of rerunning
     ev2 = tmp_path / "eval2"
     out2 = _run(str(ROOT / "recipes" / "evaluate_policy.py"), f"run={run}", "episodes_per_level=2", "difficulties=[easy]",

@@ -33,7 +33,7 @@ def test_evaluate_policy_baselines_and_fit_stop_caches_are_not_unpickled(tmp_pat
     (tmp_path / "episodes").mkdir()
     torch.save({"meta": Payload(), "metrics": {}}, tmp_path / "episodes" / "random_easy.pt")
     with pytest.raises(ValueError, match="random_easy.pt.*never unpickled"):
-        evaluate_policy.reuse_baseline(tmp_path, "random", {"level": "easy"})
+        evaluate_policy.reuse_episodes(tmp_path, "random", {"level": "easy"})
     assert RAN == []
     fit_stop = load_recipe("fit_stop")
     torch.save({"meta": Payload(), "data": {}}, tmp_path / "easy.pt")
