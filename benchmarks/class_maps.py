@@ -1,9 +1,9 @@
 """Where does a push policy think each class is? The class probabilities its Q-network reads on the 28 × 28 push grid
-(its recognition's class head, or the counting perception's map with ``model.perceived_classes``) against the
-simulator's class fractions per cell (``SapienBinEnv.class_cells``), on a split's piles at rest and after random pushes:
+(its recognition's class head), or a counting perception's class map pooled to the same grid, against the simulator's
+class fractions per cell (``SapienBinEnv.class_cells``), on a split's piles at rest and after random pushes:
 
     python benchmarks/class_maps.py --runs checkpoints/dqn_countable --dataset data/mqa_heldout     # fresh piles
-    python benchmarks/class_maps.py --runs checkpoints/dqn_countable runs/pc/countable/dqn --split train
+    python benchmarks/class_maps.py --runs checkpoints/dqn_countable checkpoints/vqa_counting/perception.pt --split train
 
 Per level, 95 % by scene: object cells (no-object fraction < 0.5) given their largest class, the mean IoU of each
 present class's region (fraction ≥ 0.3, truth and prediction alike), and the L1 error of the class fractions.
@@ -19,6 +19,7 @@ import time
 from pathlib import Path
 
 import torch
+import torch.nn.functional as F
 
 from mqa_rl import keys
 from mqa_rl.collectors.perception_frames import scene_questions
@@ -27,7 +28,7 @@ from mqa_rl.envs import actions
 from mqa_rl.envs.sapien_bin import SapienBinEnv
 from mqa_rl.evaluation.episode_metrics import scene_bootstrap_ci95
 from mqa_rl.files import write_atomic
-from mqa_rl.modules.push_policy import perceiver_of
+from mqa_rl.modules.perception import load_perception
 from mqa_rl.modules.push_qnet import PushQNet
 from mqa_rl.modules.trained_policy import load_greedy
 
@@ -36,12 +37,13 @@ MEASURES = ("object_cells_right", "region_iou", "fraction_l1")
 
 
 def class_map_reader(run: str, env):
-    """rgb uint8 [3, H, W] → the class probabilities [1 + classes, 28, 28] the run's Q-network reads."""
+    """rgb uint8 [3, H, W] → the class probabilities [1 + classes, 28, 28] the run's Q-network reads, or (a file) the
+    counting perception's, its per-pixel probabilities averaged over each push-grid cell."""
+    if Path(run).is_file():
+        perception, _ = load_perception(run)
+        return lambda rgb: F.adaptive_avg_pool2d(perception.eval().predict(rgb[None])[0].float(), actions.GRID)[0]
     actor, _, _ = load_greedy(run, None, env)
-    perceiver = perceiver_of(actor)
     net = next(m for m in actor.modules() if isinstance(m, PushQNet))
-    if perceiver is not None:
-        return lambda rgb: perceiver.read(rgb[None])[0]
     if net.class_head is None:
         raise ValueError(f"{run}: its Q-network reads no class map (model.class_map=false)")
     return lambda rgb: torch.softmax(net.class_logits(rgb[None]), 1)[0]
@@ -60,7 +62,7 @@ def scores(pred: torch.Tensor, truth: torch.Tensor) -> tuple[float, float, float
 @torch.no_grad()
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--runs", nargs="+", required=True, help="train_dqn.py run folders (shipped ones included)")
+    p.add_argument("--runs", nargs="+", required=True, help="train_dqn.py run folders (shipped ones included), or counting perception files")
     p.add_argument("--dataset", default="data/mqa")
     p.add_argument("--split", default="test")
     p.add_argument("--pushes", type=int, default=2, help="random pushes after the rest pile, each state scored")

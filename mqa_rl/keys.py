@@ -51,7 +51,6 @@ ACTION_VALUE = "action_value"                 # float32 [NUM_ACTIONS] Q(s, ·), 
 CHOSEN_ACTION_VALUE = "chosen_action_value"   # float32 [1] Q(s, a) of the chosen action
 TD_ERROR = "td_error"                         # float32 [1] squared TD error, the replay priority
 PERCEIVED_READING = "perceived_reading"       # float32 [len(READING)] a perceiving stop's reading of the state's frame
-PERCEIVED_CLASSES = "perceived_classes"       # float32 [1 + classes, 28, 28] the counting perception's class probabilities per push-grid cell (float16 in the replay)
 
 # running episode statistics (mqa_rl.transforms.episode_stats), observations read at episode ends
 EPISODE = "episode"

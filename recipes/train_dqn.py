@@ -44,7 +44,7 @@ from mqa_rl.losses.demonstration import DemonstrationLoss
 from mqa_rl.losses.dqn import make_dqn_loss
 from mqa_rl.losses.target_map import TargetMapLoss
 from mqa_rl.modules.pretrained_recognition import load_recognition
-from mqa_rl.modules.push_policy import RETIRED_OPTIONS, make_explorer, make_push_qnet, make_q_actor, perceiver_of
+from mqa_rl.modules.push_policy import RETIRED_OPTIONS, make_explorer, make_push_qnet, make_q_actor
 from mqa_rl.training.checkpoint import TrainingCheckpoint
 from mqa_rl.training.resume_guard import RESUMABLE, flatten, refuse_changed_config
 from mqa_rl.training.run_dir import RunLock, positive_ints, refuse_unresumable
@@ -80,22 +80,17 @@ def check_config(cfg: DictConfig) -> None:
 
 # settings removed since, at the value that meant "off": a saved run may name them, a new config does not
 RETIRED_SETTINGS = {**{f"model.{k}": v for k, v in RETIRED_OPTIONS.items()}, "demos.max_states": None}
-# settings added since, at the value that builds what runs without them built: a new config names them, a saved run not
-ADDED_SETTINGS = {"model.perceived_classes": None}
 
 
 def resumable(saved_config: Path, config: dict) -> tuple[str, ...]:
     """The settings a resume may change: ``RESUMABLE``; the demonstrations' settings when neither the saved run
     nor ``config`` learns from demonstrations (unread then: a changed default of theirs changes no experiment);
-    the removed settings the saved run names at their "off" value and the added ones ``config`` sets to theirs (they
-    build the same run)."""
+    and the removed settings the saved run names at their "off" value (they built the same run)."""
     saved = OmegaConf.to_container(OmegaConf.load(saved_config)) if saved_config.exists() else {}
     no_demos = not (saved.get("demos") or {}).get("path") and not (config.get("demos") or {}).get("path")
     old = flatten(saved)
     retired = tuple(k for k, off in RETIRED_SETTINGS.items() if k in old and old[k] == off)
-    new = flatten(config)
-    added = tuple(k for k, off in ADDED_SETTINGS.items() if k not in old and new.get(k, off) == off)
-    return RESUMABLE + ("init_from",) + retired + added + (("demos.",) if no_demos else ())
+    return RESUMABLE + ("init_from",) + retired + (("demos.",) if no_demos else ())
 
 
 INIT_HINT = ("init_from takes a recipes/train_dqn.py run folder (its newest checkpoint), one of its "
@@ -232,8 +227,7 @@ def _train(cfg: DictConfig, out: Path, created: bool) -> dict:
         meta = load_recognition(net, cfg.model.pretrained, classes, freeze=cfg.model.get("pretrained_frozen", True))
         print(f"recognition from {cfg.model.pretrained}: {meta}")
     net = net.to(device)
-    actor = make_q_actor(net, eval_env.action_spec, masked=cfg.action_mask,
-                         perceived_classes=cfg.model.get("perceived_classes"))
+    actor = make_q_actor(net, eval_env.action_spec, masked=cfg.action_mask)
     if init is not None:                         # its weights first: a network of another shape is refused here
         restore_verified(Checkpoint(policy=actor), init[0], "init_from must hold a Q-network of the network this "
                          "config builds (the same model.* settings)", components=["policy"])
@@ -248,12 +242,9 @@ def _train(cfg: DictConfig, out: Path, created: bool) -> dict:
     aux_weight = float(cfg.loss.get("target_map_weight", 0.0))
     aux_loss = TargetMapLoss(net, aux_weight) if aux_weight > 0 else None
     demo_cfg = cfg.get("demos") or {}
-    perceiver = perceiver_of(actor)                 # the perceived classes' reader, when the network reads them
-    t0 = time.perf_counter()                        # their perceived classes: read once, kept beside them
-    demos = load_demonstrations(demo_cfg["path"], cfg.dataset, perceiver) if demo_cfg.get("path") else None
+    demos = load_demonstrations(demo_cfg["path"], cfg.dataset) if demo_cfg.get("path") else None
     if demos is not None:
-        print(f"demonstrations: {len(demos)} states from {demo_cfg['path']} ({time.perf_counter() - t0:.0f} s"
-              f"{' with their perceived classes' if perceiver is not None else ''})")
+        print(f"demonstrations: {len(demos)} states from {demo_cfg['path']}")
     demo_loss = (DemonstrationLoss(net, demo_cfg.get("loss", "margin"), demo_cfg["margin"], demo_cfg["weight"],
                                    demo_cfg.get("smooth_cells", 0.0), demo_cfg.get("stop_margin", 0.0),
                                    demo_cfg.get("direction_weight", 0.0))
@@ -334,8 +325,6 @@ def _train(cfg: DictConfig, out: Path, created: bool) -> dict:
                 t_collect = time.perf_counter() - t_wait
                 data = data.reshape(-1)
                 n = data.numel()
-                if perceiver is not None:               # the acting policy read the roots; the successors once here
-                    perceiver.fill(data)
                 rb.extend(compact_transitions(data))
                 state["frames"] += n
                 counter.fill_(state["frames"])

@@ -52,16 +52,14 @@ def collect_demonstrations(env, states: int, *, progress: bool = True, **oracle_
     return torch.stack(out)
 
 
-def load_demonstrations(path, dataset_root: str | Path | None = None, perceiver=None) -> TensorDict:
+def load_demonstrations(path, dataset_root: str | Path | None = None) -> TensorDict:
     """The demonstrations in memory; clear errors for a missing, unfinished or other-dataset folder.
-    A list of folders is concatenated (the students' two collection processes). ``perceiver``: a
-    ``PerceivedClasses`` (a policy that reads them), whose readings each folder keeps (``PerceivedClasses.kept``)."""
+    A list of folders is concatenated (the students' two collection processes)."""
     if not isinstance(path, (str, Path)):                     # a list (or hydra ListConfig) of folders
-        parts = [load_demonstrations(p, dataset_root, perceiver) for p in path]
+        parts = [load_demonstrations(p, dataset_root) for p in path]
         if not parts:
             raise ValueError("demos.path is an empty list: give one or more demonstration folders")
-        wanted = (*DEMO_KEYS, keys.PERCEIVED_CLASSES) if perceiver is not None else DEMO_KEYS
-        return torch.cat([p.select(*wanted) for p in parts])
+        return torch.cat([p.select(*DEMO_KEYS) for p in parts])
     path = Path(path)
     hint = "collect them with `python recipes/collect_demonstrations.py` (or set demos.path=null)"
     if not (path / DEMOS_META).exists():
@@ -76,4 +74,4 @@ def load_demonstrations(path, dataset_root: str | Path | None = None, perceiver=
     missing = [k for k in DEMO_KEYS if k not in demos.keys(True)]
     if missing:
         raise ValueError(f"{path} lacks {missing}: {hint}")
-    return perceiver.kept(demos, path) if perceiver is not None else demos
+    return demos

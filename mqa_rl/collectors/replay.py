@@ -2,8 +2,7 @@
 
 A transition keeps only what ``DQNLoss`` reads: rgb (uint8), depth (float16: 0.5 mm steps at 0.9 m),
 question, action mask, action, the visible-target cells (float16, for the auxiliary loss of
-``target_map.py``), the perceived classes (float16) for a policy that reads them, and under ``"next"`` the same
-observations plus reward and done flags.
+``target_map.py``), and under ``"next"`` the same observations plus reward and done flags.
 ``info`` and the reward terms stay out (the logs read them from the collected batch). See
 ``transition_bytes`` for the size; the storage is a memmap on disk, so RAM holds only the pages in use.
 
@@ -32,12 +31,9 @@ REPLAY_KEYS = (
 
 
 def compact_transitions(data: TensorDictBase) -> TensorDictBase:
-    """Collected transitions [N] → what the replay stores: selected keys (the perceived classes of both states when the
-    policy reads them: ``PerceivedClasses.fill`` first), depth and grid maps as float16."""
-    perceived = keys.PERCEIVED_CLASSES in data.keys()
-    grids = (keys.PERCEIVED_CLASSES, ("next", keys.PERCEIVED_CLASSES)) if perceived else ()
-    out = data.select(*REPLAY_KEYS, *grids, strict=True)
-    for key in (keys.DEPTH, ("next", keys.DEPTH), keys.TARGET_CELLS, *grids):
+    """Collected transitions [N] → what the replay stores: selected keys, depth as float16."""
+    out = data.select(*REPLAY_KEYS, strict=True)
+    for key in (keys.DEPTH, ("next", keys.DEPTH), keys.TARGET_CELLS):
         out.set(key, out.get(key).to(torch.float16))
     return out
 

@@ -56,7 +56,7 @@ class DemonstrationLoss(LossModule):
         self.direction_weight = float(direction_weight)
 
     def forward(self, tensordict: TensorDictBase) -> TensorDict:
-        q = self.net(*self.net.inputs(tensordict))
+        q = self.net(tensordict.get(keys.RGB), tensordict.get(keys.DEPTH), tensordict.get(keys.QUESTION))
         mask = tensordict.get(keys.ACTION_MASK)
         demo = tensordict.get(keys.ACTION).reshape(-1)
         ok = mask.gather(-1, demo[:, None]).squeeze(-1)

@@ -22,7 +22,7 @@ def make_dqn_loss(actor, cfg: Mapping) -> tuple[DQNLoss, HardUpdate | SoftUpdate
     gamma = float(cfg.get("gamma", 0.6))
     if not 0.0 <= gamma < 1.0:
         raise ValueError(f"loss.gamma={gamma} must lie in [0, 1)")
-    loss = DQNLoss(actor, loss_function=LOSS_FUNCTIONS[function], delay_value=True, action_space="categorical",
+    loss = DQNLoss(actor, loss_function=LOSS_FUNCTIONS[function], delay_value=True,
                    double_dqn=bool(cfg.get("double_dqn", True)))
     loss.make_value_estimator(gamma=gamma)
     target = dict(cfg.get("target_update", {"kind": "hard", "interval": 100}))

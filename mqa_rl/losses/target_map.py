@@ -40,7 +40,7 @@ class TargetMapLoss(LossModule):
             raise KeyError(f"{keys.TARGET_CELLS} missing from the sampled transitions: the replay must store it "
                            f"(mqa_rl.collectors.replay.REPLAY_KEYS) and the env must write it (SapienBinEnv does)")
         cells = tensordict.get(keys.TARGET_CELLS).to(torch.float32)
-        logits = self.net.target_logits(*self.net.inputs(tensordict))
+        logits = self.net.target_logits(tensordict.get(keys.RGB), tensordict.get(keys.DEPTH), tensordict.get(keys.QUESTION))
         loss = F.binary_cross_entropy_with_logits(logits, cells.reshape(logits.shape))
         with torch.no_grad():
             pred, true = logits > 0, cells.reshape(logits.shape) >= 0.25

@@ -73,9 +73,8 @@ def stop_features(net: PushQNet, td: TensorDictBase, max_pushes: int) -> torch.T
     best, _, any_push = best_allowed_push(q)
     best = torch.where(any_push, best, q[:, actions.STOP])          # no allowed push: no advantage over stop
     rgb, depth = td.get(keys.RGB), td.get(keys.DEPTH)
-    classes = td.get(keys.PERCEIVED_CLASSES) if net.perceived_classes else None     # the policy wrote them
     maps = net.geometry_maps(rgb.reshape(-1, *rgb.shape[-3:]), depth.reshape(-1, *depth.shape[-3:]),
-                             td.get(keys.QUESTION).reshape(-1, td.get(keys.QUESTION).shape[-1]), classes)
+                             td.get(keys.QUESTION).reshape(-1, td.get(keys.QUESTION).shape[-1]))
     t, presence, h_mean, h_max, h_min = maps.unbind(1)
     weight = t / t.sum((-2, -1), keepdim=True).clamp(min=1e-6)
     pushes = td.get(keys.PUSH_COUNT).reshape(-1).to(torch.float32)

@@ -32,12 +32,6 @@ Recognition is then learnt once from the segmentation of a few thousand renders 
 ImageNet features for it) and the DQN learns only where to push given t and depth; ``target_logits`` is
 logit(t), so the auxiliary target-map loss (``mqa_rl.losses.target_map``) trains the question's attention.
 
-``perceived_classes`` (with ``class_map``): the class probabilities p come from the observation
-(``keys.PERCEIVED_CLASSES``, the counting perception's class map pooled to the push grid, written by
-``mqa_rl.modules.perceived_classes.PerceivedClasses``) instead of the class head, which is then unused. On piles
-it never saw the class head tells object cells' classes apart 0.76-0.78 of the time, the counting perception
-0.93-0.95 (docs/policy.md, "The students' recognition on new piles").
-
 ``rotated_head`` (VPG's rotation sharing, ``mqa_rl.modules.rotated_head``): one push head scores "push
 right" on the state rotated for each of the 8 directions, so every demonstration and reward teaches all
 directions; same output layout.
@@ -57,7 +51,6 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from mqa_rl import keys
 from mqa_rl.envs import actions
 from mqa_rl.modules.rotated_head import RotatedPushHead
 from mqa_rl.modules.trunks import conv_stack, make_trunk
@@ -83,8 +76,7 @@ class QuestionEncoder(nn.Module):
 
 
 class PushQNet(nn.Module):
-    """(rgb uint8 [*B,3,H,W], depth [*B,1,H,W] metres, question int64 [*B,L][, perceived classes
-    [*B,1+classes,28,28]]) → Q [*B, 6273]; ``in_keys`` names the inputs' observation keys in that order."""
+    """(rgb uint8 [*B,3,H,W], depth [*B,1,H,W] metres, question int64 [*B,L]) → Q [*B, 6273]."""
 
     def __init__(
         self,
@@ -106,15 +98,10 @@ class PushQNet(nn.Module):
         num_classes: int = 20,
         rotated_head: bool = False,
         geometric_push: bool = False,
-        perceived_classes: bool = False,
     ):
         super().__init__()
         if geometric_push and not (class_map and rotated_head):
             raise ValueError("geometric_push needs class_map=true (its target map) and rotated_head=true (its push branch)")
-        if perceived_classes and not class_map:
-            raise ValueError("perceived_classes replaces the class map's probabilities: it needs class_map=true")
-        self.perceived_classes = bool(perceived_classes)
-        self.in_keys = [keys.RGB, keys.DEPTH, keys.QUESTION, *([keys.PERCEIVED_CLASSES] if perceived_classes else [])]
         self.geometric_push = bool(geometric_push)
         self.trunk_name = trunk
         self.imagenet_input = trunk != "light"
@@ -189,33 +176,20 @@ class PushQNet(nn.Module):
             raise RuntimeError("this PushQNet has no class head: build it with class_map=True")
         return self.class_head(self._rgb_features(rgb))
 
-    def _class_probs(self, rgb_features, classes: torch.Tensor | None) -> torch.Tensor:
-        """p [B, 1 + classes, 28, 28]: the observation's perceived classes (``perceived_classes``), else the class head's
-        on the rgb trunk's features (``rgb_features``: the features, or a callable computing them only when needed)."""
-        if not self.perceived_classes:
-            fr = rgb_features() if callable(rgb_features) else rgb_features
-            return torch.softmax(self.class_head(fr), 1)
-        if classes is None:
-            raise ValueError(f"this PushQNet reads the perceived classes ({keys.PERCEIVED_CLASSES!r}): pass them beside "
-                             f"rgb, depth and question (PerceivedClasses writes them into the observation)")
-        return classes.reshape(-1, *classes.shape[-3:]).to(self.question_classes.weight.dtype)
-
-    def _targets(self, probs: torch.Tensor, qf: torch.Tensor) -> torch.Tensor:
-        """t = Σ_c softmax(question)_c · p_c, [B, 1, 28, 28]."""
+    def _targets(self, fr: torch.Tensor, qf: torch.Tensor) -> torch.Tensor:
+        """t = Σ_c softmax(question)_c · softmax(class logits)_c, [B, 1, 28, 28]."""
         weights = torch.softmax(self.question_classes(qf), -1)[:, :, None, None]
-        return (weights * probs).sum(1, keepdim=True)
+        return (weights * torch.softmax(self.class_head(fr), 1)).sum(1, keepdim=True)
 
-    def _features(self, rgb, depth, question, classes=None):
+    def _features(self, rgb, depth, question):
         fr = self._rgb_features(rgb)
         fd = self._grid(self.depth_trunk(self._align(self._height(depth))))
         qf = self.question(question)
-        probs = self._class_probs(fr, classes) if self.class_head is not None else None
-        return fr, fd, qf, probs, (self._targets(probs, qf) if probs is not None else None)
+        return fr, fd, qf, (self._targets(fr, qf) if self.class_head is not None else None)
 
-    def state(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor, classes=None) -> torch.Tensor:
+    def state(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor) -> torch.Tensor:
         """[B, C, 28, 28]: visual features, the tiled question feature (coordinates, the targets' map)."""
-        fr, fd, qf, _, targets = self._features(rgb, depth, question, classes)
-        return self._state(fr, fd, qf, targets)
+        return self._state(*self._features(rgb, depth, question))
 
     def _state(self, fr, fd, qf, targets) -> torch.Tensor:
         visual = self.fuse(torch.cat([fr, fd], 1))
@@ -229,48 +203,44 @@ class PushQNet(nn.Module):
             parts.append(targets)
         return torch.cat(parts, 1)
 
-    def geometry(self, probs: torch.Tensor, depth: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
+    def geometry(self, fr: torch.Tensor, depth: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
         """[B, 5, 28, 28] the geometric push branch's input: t, object presence, height mean / max / min.
 
         The height is pooled over each cell's pixels as they are (a cell's pixels 8r…8r+7 are centred on
         the push start; no ``_align`` shift, which is for the conv trunk's receptive fields)."""
+        probs = torch.softmax(self.class_head(fr), 1)
         h = self._height(depth)[:, :1]
         pooled = [F.adaptive_avg_pool2d(h, actions.GRID), F.adaptive_max_pool2d(h, actions.GRID),
                   -F.adaptive_max_pool2d(-h, actions.GRID)]
         return torch.cat([targets, 1.0 - probs[:, :1], *pooled], 1)
 
-    def geometry_maps(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor, classes=None) -> torch.Tensor:
+    def geometry_maps(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor) -> torch.Tensor:
         """``geometry`` from the observation: [B, 5, 28, 28] (``class_map``; the learned stop reads it)."""
         if self.class_head is None:
             raise RuntimeError("this PushQNet has no class head: build it with class_map=True")
-        probs = self._class_probs(lambda: self._rgb_features(rgb), classes)      # no trunk pass for perceived classes
-        return self.geometry(probs, depth, self._targets(probs, self.question(question)))
+        fr, qf = self._rgb_features(rgb), self.question(question)
+        return self.geometry(fr, depth, self._targets(fr, qf))
 
-    def q_map(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor, classes=None) -> torch.Tensor:
+    def q_map(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor) -> torch.Tensor:
         """[B, 9, 28, 28]: 8 push direction maps and the stop map (batch dims flattened)."""
-        fr, fd, qf, probs, targets = self._features(rgb, depth, question, classes)
+        fr, fd, qf, targets = self._features(rgb, depth, question)
         state = self._state(fr, fd, qf, targets)
         if not self.geometric_push:
             return self.head(state)
-        return self.head(state, self.geometry(probs, depth, targets))
+        return self.head(state, self.geometry(fr, depth, targets))
 
-    def target_logits(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor, classes=None) -> torch.Tensor:
+    def target_logits(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor) -> torch.Tensor:
         """[B, 28, 28] logits of "a target of this question is visible in the cell": logit(t) of the class map
-        (rgb, the perceived classes and question only: the depth trunk plays no part)."""
+        (rgb and question only: the depth trunk plays no part)."""
         if self.class_head is None:
             raise RuntimeError("this PushQNet has no target map: build it with class_map=True")
-        probs = self._class_probs(lambda: self._rgb_features(rgb), classes)
-        targets = self._targets(probs, self.question(question))
+        targets = self._targets(self._rgb_features(rgb), self.question(question))
         return torch.logit(targets.clamp(1e-4, 1 - 1e-4)).squeeze(1)
 
-    def inputs(self, td) -> tuple:
-        """The network's inputs from a tensordict of observations, in ``in_keys`` order."""
-        return tuple(td.get(k) for k in self.in_keys)
-
-    def forward(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor, classes=None) -> torch.Tensor:
+    def forward(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor) -> torch.Tensor:
         batch = rgb.shape[:-3]
         maps = self.q_map(rgb.reshape(-1, *rgb.shape[-3:]), depth.reshape(-1, *depth.shape[-3:]),
-                          question.reshape(-1, question.shape[-1]), classes)
+                          question.reshape(-1, question.shape[-1]))
         push = maps[:, : actions.DIRECTIONS].flatten(1)          # d·784 + row·28 + col
         stop = maps[:, actions.DIRECTIONS].mean((-2, -1)).unsqueeze(-1)
         return torch.cat([push, stop], -1).reshape(*batch, actions.NUM_ACTIONS)

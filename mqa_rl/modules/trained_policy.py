@@ -59,8 +59,7 @@ def load_greedy(run: str | Path, checkpoint: str | Path | None, env):
     base = getattr(env, "base_env", env)
     net = make_push_qnet(cfg.model, vocab_size=env.observation_spec[keys.QUESTION].space.n,
                          camera_distance=base.camera.distance, num_classes=len(base.dataset.classes))
-    actor = make_q_actor(net, env.action_spec, masked=cfg.action_mask,
-                         perceived_classes=cfg.model.get("perceived_classes"))
+    actor = make_q_actor(net, env.action_spec, masked=cfg.action_mask)
     path = Path(checkpoint) if checkpoint else None
     if path is None:
         path = newest_run_checkpoint(run)

@@ -32,8 +32,8 @@ from torchrl.envs import Transform
 from mqa_rl import keys
 from mqa_rl.envs import actions
 
-# what turns like the images: the frames and, where stored, the grid maps (perceived classes, the visible-target cells)
-TURNED_MAPS = (keys.RGB, keys.DEPTH, keys.PERCEIVED_CLASSES, keys.TARGET_CELLS)
+# what turns like the images: the frames and, where stored, a grid map (the visible-target cells)
+TURNED_MAPS = (keys.RGB, keys.DEPTH, keys.TARGET_CELLS)
 DIHEDRAL = 8            # the number of symmetries
 
 

@@ -233,9 +233,9 @@ def test_a_removed_option_at_its_off_value_builds_the_same_network_and_is_refuse
     plain = make_push_qnet(cfg, vocab_size=VOCAB, camera_distance=0.9)
     torch.manual_seed(0)
     saved = make_push_qnet({**cfg, "target_head": False, "film": False, "geometric_stop": False, "boundary_map": False,
-                            "head_dilation": 1}, vocab_size=VOCAB, camera_distance=0.9)
+                            "head_dilation": 1, "perceived_classes": None}, vocab_size=VOCAB, camera_distance=0.9)
     assert plain.state_dict().keys() == saved.state_dict().keys()
     assert all(torch.equal(v, saved.state_dict()[k]) for k, v in plain.state_dict().items())
-    for option, on in (("film", True), ("head_dilation", 2), ("target_head", True)):
+    for option, on in (("film", True), ("head_dilation", 2), ("target_head", True), ("perceived_classes", "p.pt")):
         with pytest.raises(ValueError, match=rf"\['{option}={on}'\] were removed"):
             make_push_qnet({**cfg, option: on}, vocab_size=VOCAB, camera_distance=0.9)

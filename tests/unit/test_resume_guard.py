@@ -66,17 +66,3 @@ def test_another_recipes_folder_is_named_not_diffed(tmp_path):
     one_new_section = {**RUN, "demos": {"weight": 2.0}}                     # a changed setting stays a changed setting
     with pytest.raises(ValueError, match="demos.weight"):
         refuse_changed_config(saved, one_new_section)
-
-
-def test_a_setting_added_since_resumes_at_the_value_that_builds_the_old_run(tmp_path):
-    """A run saved before model.perceived_classes existed resumes under its null default; set, it is a change."""
-    from conftest import load_recipe
-
-    resumable = load_recipe("train_dqn").resumable
-    saved = tmp_path / "config.yaml"
-    OmegaConf.save(OmegaConf.create({**RUN, "model": {"class_map": True}}), saved)
-    same = {**RUN, "model": {"class_map": True, "perceived_classes": None}}
-    assert refuse_changed_config(saved, same, free=resumable(saved, same)) == []
-    other = {**RUN, "model": {"class_map": True, "perceived_classes": "perception.pt"}}
-    with pytest.raises(ValueError, match=r"model\.perceived_classes: '\(unset\)' -> 'perception.pt'"):
-        refuse_changed_config(saved, other, free=resumable(saved, other))
