@@ -91,9 +91,9 @@ def statistics(values: torch.Tensor, scenes: torch.Tensor | None) -> dict:
     return out
 
 
-def reuse_episodes(folder, name: str, meta: dict) -> dict[str, torch.Tensor] | None:
+def reuse_episodes(folder, name: str, meta: dict, needs: tuple[str, ...] = ()) -> dict[str, torch.Tensor] | None:
     """The per-episode metrics of policy ``name`` from an earlier evaluation (or this one, killed), if on the same
-    questions."""
+    questions and holding the metrics ``needs`` names (a kept frame's, which an evaluation without one did not record)."""
     path = Path(folder) / "episodes" / f"{name}_{meta['level']}.pt"
     if not path.is_file():
         return None
@@ -105,6 +105,10 @@ def reuse_episodes(folder, name: str, meta: dict) -> dict[str, torch.Tensor] | N
         print(f"  {path}: other questions or settings, not reused")
         return None
     metrics = dict(saved["metrics"])
+    lacking = [k for k in needs if k not in metrics]
+    if lacking:
+        print(f"  {path}: no {', '.join(lacking)} (run without kept_frame=), not reused")
+        return None
     if saved["meta"].get("reward") != meta["reward"]:   # another reward config: its rewards don't compare
         metrics = {k: v for k, v in metrics.items() if k != "reward" and not k.startswith("term/")}
     print(f"  {name}: reused {path}")
@@ -149,9 +153,10 @@ def main(cfg: DictConfig) -> None:
     metas = {(level, name): episodes_meta(cfg, dataset, level, qtypes, max_pushes, reward, push_memory)
              | ({"policy": identity} if name == "greedy" else {}) for level in cfg.difficulties for name in cfg.policies}
     for (level, name), meta in metas.items():
-        reused = reuse_episodes(out, name, meta)        # a killed evaluation resumes
+        needs = KEPT_REPORTED if cfg.kept_frame else ()
+        reused = reuse_episodes(out, name, meta, needs)        # a killed evaluation resumes
         if reused is None and cfg.baseline_from and name != "greedy":
-            reused = reuse_episodes(cfg.baseline_from, name, meta)
+            reused = reuse_episodes(cfg.baseline_from, name, meta, needs)
         if reused is not None:
             metrics[level, name] = reused
         else:

@@ -95,3 +95,18 @@ def test_every_model_file_loader_refuses_a_pickled_payload(tmp_path, loader):
     with pytest.raises(ValueError, match="crafted.pt"):
         load(path)
     assert RAN == []
+
+
+def test_evaluate_policy_reuses_no_baseline_that_lacks_the_kept_frame_metrics(tmp_path):
+    """A random unit banked by an evaluation without kept_frame= has no counter_kept: a kept-frame evaluation runs it
+    again rather than report NaN for it."""
+    evaluate_policy = load_recipe("evaluate_policy")
+    (tmp_path / "episodes").mkdir()
+    meta = {"level": "easy", "episodes": 2, "reward": {}}
+    plain = {"counter_stop": torch.ones(2)}
+    torch.save({"meta": meta, "metrics": plain}, tmp_path / "episodes" / "random_easy.pt")
+    assert evaluate_policy.reuse_episodes(tmp_path, "random", meta)["counter_stop"].tolist() == [1.0, 1.0]
+    assert evaluate_policy.reuse_episodes(tmp_path, "random", meta, evaluate_policy.KEPT_REPORTED) is None
+    kept = {**plain, **{k: torch.zeros(2) for k in evaluate_policy.KEPT_REPORTED}}
+    torch.save({"meta": meta, "metrics": kept}, tmp_path / "episodes" / "random_easy.pt")
+    assert evaluate_policy.reuse_episodes(tmp_path, "random", meta, evaluate_policy.KEPT_REPORTED) is not None
