@@ -44,15 +44,21 @@ def _digests(components_dir: Path, skip: Path, component: str | None = None) -> 
     return out
 
 
-def component_digest(checkpoint_dir: Path, component: str) -> str:
-    """One SHA-256 for a component's files as the checkpoint's integrity record lists them (``"policy"``: the
-    weights): what tells two evaluations they ran the same policy, without hashing the files again."""
+def _integrity_record(checkpoint_dir: Path, component: str | None = None) -> tuple[Path, dict[str, str]]:
+    """(the record's file, its digests: all, or ``component``'s files only); ValueError when there is none."""
     found = list((Path(checkpoint_dir) / "components").glob(f"*{INTEGRITY}/sha256.json"))
     if not found:
         raise ValueError(f"{checkpoint_dir}: no integrity record (sha256.json): not a complete mqa_rl training checkpoint")
     record = json.loads(found[0].read_text())
-    listed = {k: v for k, v in sorted(record.items()) if k.split("/", 1)[0].endswith(f"-{component}")}
-    return hashlib.sha256(json.dumps(listed).encode()).hexdigest()
+    if component is not None:
+        record = {k: v for k, v in record.items() if k.split("/", 1)[0].endswith(f"-{component}")}
+    return found[0], record
+
+
+def component_digest(checkpoint_dir: Path, component: str) -> str:
+    """One SHA-256 for a component's files as the checkpoint's integrity record lists them (``"policy"``: the
+    weights): what tells two evaluations they ran the same policy, without hashing the files again."""
+    return hashlib.sha256(json.dumps(dict(sorted(_integrity_record(checkpoint_dir, component)[1].items()))).encode()).hexdigest()
 
 
 class IntegrityAdapter(CheckpointAdapter):
@@ -77,13 +83,9 @@ class IntegrityAdapter(CheckpointAdapter):
         for root in roots:
             refuse_pickles(root, what="the checkpoint", hint="mqa_rl's checkpoints hold tensors and JSON only; use a "
                                                            "checkpoint from a source you trust")
-        found = list((checkpoint_dir / "components").glob(f"*{INTEGRITY}/sha256.json"))
-        if not found:
-            raise ValueError("no integrity record (sha256.json): not a complete mqa_rl training checkpoint")
-        expected = json.loads(found[0].read_text())
-        actual = _digests(checkpoint_dir / "components", found[0].parent, component)
+        record, expected = _integrity_record(checkpoint_dir, component)
+        actual = _digests(checkpoint_dir / "components", record.parent, component)
         if component is not None:
-            expected = {k: v for k, v in expected.items() if k.split("/", 1)[0].endswith(f"-{component}")}
             if not expected:
                 raise ValueError(f"the integrity record lists no file of the {component!r} component")
         bad = sorted(k for k in expected if actual.get(k) != expected[k]) + sorted(set(actual) - set(expected))

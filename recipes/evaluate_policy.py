@@ -152,8 +152,8 @@ def main(cfg: DictConfig) -> None:
     identity = greedy_identity(cfg) if "greedy" in cfg.policies else None
     metas = {(level, name): episodes_meta(cfg, dataset, level, qtypes, max_pushes, reward, push_memory)
              | ({"policy": identity} if name == "greedy" else {}) for level in cfg.difficulties for name in cfg.policies}
+    needs = KEPT_REPORTED if cfg.kept_frame else ()          # a kept-frame evaluation reports them for every policy
     for (level, name), meta in metas.items():
-        needs = KEPT_REPORTED if cfg.kept_frame else ()
         reused = reuse_episodes(out, name, meta, needs)        # a killed evaluation resumes
         if reused is None and cfg.baseline_from and name != "greedy":
             reused = reuse_episodes(cfg.baseline_from, name, meta, needs)
