@@ -176,20 +176,24 @@ class PushQNet(nn.Module):
             raise RuntimeError("this PushQNet has no class head: build it with class_map=True")
         return self.class_head(self._rgb_features(rgb))
 
-    def _targets(self, fr: torch.Tensor, qf: torch.Tensor) -> torch.Tensor:
-        """t = Σ_c softmax(question)_c · softmax(class logits)_c, [B, 1, 28, 28]."""
+    def _targets(self, probs: torch.Tensor, qf: torch.Tensor) -> torch.Tensor:
+        """t = Σ_c softmax(question)_c · p_c over the class head's probabilities p, [B, 1, 28, 28]."""
         weights = torch.softmax(self.question_classes(qf), -1)[:, :, None, None]
-        return (weights * torch.softmax(self.class_head(fr), 1)).sum(1, keepdim=True)
+        return (weights * probs).sum(1, keepdim=True)
 
     def _features(self, rgb, depth, question):
+        """(rgb features, depth features, question feature, class probabilities p, target map t): p and t None
+        without the class head; p computed once for both the target map and the geometric branch."""
         fr = self._rgb_features(rgb)
         fd = self._grid(self.depth_trunk(self._align(self._height(depth))))
         qf = self.question(question)
-        return fr, fd, qf, (self._targets(fr, qf) if self.class_head is not None else None)
+        probs = torch.softmax(self.class_head(fr), 1) if self.class_head is not None else None
+        return fr, fd, qf, probs, (self._targets(probs, qf) if probs is not None else None)
 
     def state(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor) -> torch.Tensor:
         """[B, C, 28, 28]: visual features, the tiled question feature (coordinates, the targets' map)."""
-        return self._state(*self._features(rgb, depth, question))
+        fr, fd, qf, _, targets = self._features(rgb, depth, question)
+        return self._state(fr, fd, qf, targets)
 
     def _state(self, fr, fd, qf, targets) -> torch.Tensor:
         visual = self.fuse(torch.cat([fr, fd], 1))
@@ -203,12 +207,11 @@ class PushQNet(nn.Module):
             parts.append(targets)
         return torch.cat(parts, 1)
 
-    def geometry(self, fr: torch.Tensor, depth: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
+    def geometry(self, probs: torch.Tensor, depth: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
         """[B, 5, 28, 28] the geometric push branch's input: t, object presence, height mean / max / min.
 
         The height is pooled over each cell's pixels as they are (a cell's pixels 8r…8r+7 are centred on
         the push start; no ``_align`` shift, which is for the conv trunk's receptive fields)."""
-        probs = torch.softmax(self.class_head(fr), 1)
         h = self._height(depth)[:, :1]
         pooled = [F.adaptive_avg_pool2d(h, actions.GRID), F.adaptive_max_pool2d(h, actions.GRID),
                   -F.adaptive_max_pool2d(-h, actions.GRID)]
@@ -218,23 +221,23 @@ class PushQNet(nn.Module):
         """``geometry`` from the observation: [B, 5, 28, 28] (``class_map``; the learned stop reads it)."""
         if self.class_head is None:
             raise RuntimeError("this PushQNet has no class head: build it with class_map=True")
-        fr, qf = self._rgb_features(rgb), self.question(question)
-        return self.geometry(fr, depth, self._targets(fr, qf))
+        probs = torch.softmax(self.class_logits(rgb), 1)
+        return self.geometry(probs, depth, self._targets(probs, self.question(question)))
 
     def q_map(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor) -> torch.Tensor:
         """[B, 9, 28, 28]: 8 push direction maps and the stop map (batch dims flattened)."""
-        fr, fd, qf, targets = self._features(rgb, depth, question)
+        fr, fd, qf, probs, targets = self._features(rgb, depth, question)
         state = self._state(fr, fd, qf, targets)
         if not self.geometric_push:
             return self.head(state)
-        return self.head(state, self.geometry(fr, depth, targets))
+        return self.head(state, self.geometry(probs, depth, targets))
 
     def target_logits(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor) -> torch.Tensor:
         """[B, 28, 28] logits of "a target of this question is visible in the cell": logit(t) of the class map
         (rgb and question only: the depth trunk plays no part)."""
         if self.class_head is None:
             raise RuntimeError("this PushQNet has no target map: build it with class_map=True")
-        targets = self._targets(self._rgb_features(rgb), self.question(question))
+        targets = self._targets(torch.softmax(self.class_logits(rgb), 1), self.question(question))
         return torch.logit(targets.clamp(1e-4, 1 - 1e-4)).squeeze(1)
 
     def forward(self, rgb: torch.Tensor, depth: torch.Tensor, question: torch.Tensor) -> torch.Tensor:

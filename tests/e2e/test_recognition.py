@@ -96,8 +96,9 @@ def test_geometry_maps_are_the_target_map_presence_and_per_cell_heights():
     depth[..., 16:20, 48:56] = 0.8                                              # half of cell (2, 6) 10 cm high
     with torch.no_grad():
         fr = net._rgb_features(rgb)
-        t = net._targets(fr, net.question(q))
-        geo = net.geometry(fr, depth, t)
+        probs = torch.softmax(net.class_head(fr), 1)
+        t = net._targets(probs, net.question(q))
+        geo = net.geometry(probs, depth, t)
     assert geo.shape == (1, 5, actions.GRID, actions.GRID)
     torch.testing.assert_close(geo[:, 0:1], t)
     torch.testing.assert_close(geo[:, 1], 1 - torch.softmax(net.class_head(fr), 1)[:, 0])
@@ -112,8 +113,8 @@ def test_geometric_push_stays_equivariant_to_quarter_turns():
     rgb, depth, q = _obs(batch=1)
     turn = lambda x: torch.rot90(x, 1, dims=(-2, -1))       # noqa: E731
     with torch.no_grad():
-        fr, fd, qf, t = net._features(rgb, depth, q)
-        state, geo = net._state(fr, fd, qf, t), net.geometry(fr, depth, t)
+        fr, fd, qf, probs, t = net._features(rgb, depth, q)
+        state, geo = net._state(fr, fd, qf, t), net.geometry(probs, depth, t)
         qmap, turned = net.head(state, geo), net.head(turn(state), turn(geo))
     for d in range(actions.DIRECTIONS):
         torch.testing.assert_close(turned[:, (d + 2) % 8], turn(qmap[:, d]), atol=1e-5, rtol=1e-4)
