@@ -40,8 +40,8 @@ def class_map_reader(run: str, env):
     """rgb uint8 [3, H, W] → the class probabilities [1 + classes, 28, 28] the run's Q-network reads, or (a file) the
     counting perception's, its per-pixel probabilities averaged over each push-grid cell."""
     if Path(run).is_file():
-        perception, _ = load_perception(run)
-        return lambda rgb: F.adaptive_avg_pool2d(perception.eval().predict(rgb[None])[0].float(), actions.GRID)[0]
+        perception = load_perception(run)[0].eval()
+        return lambda rgb: F.adaptive_avg_pool2d(perception.predict(rgb[None])[0].float(), actions.GRID)[0]
     actor, _, _ = load_greedy(run, None, env)
     net = next(m for m in actor.modules() if isinstance(m, PushQNet))
     if net.class_head is None:
