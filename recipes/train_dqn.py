@@ -29,7 +29,6 @@ import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
 from torchrl.checkpoint import Checkpoint, CheckpointRotation
-from tqdm import tqdm
 
 from mqa_rl import keys
 from mqa_rl.collectors.demonstrations import load_demonstrations
@@ -45,6 +44,7 @@ from mqa_rl.losses.dqn import make_dqn_loss
 from mqa_rl.losses.target_map import TargetMapLoss
 from mqa_rl.modules.pretrained_recognition import load_recognition
 from mqa_rl.modules.push_policy import RETIRED_OPTIONS, make_explorer, make_push_qnet, make_q_actor
+from mqa_rl.progress import Progress
 from mqa_rl.training.checkpoint import TrainingCheckpoint
 from mqa_rl.training.resume_guard import RESUMABLE, flatten, refuse_changed_config
 from mqa_rl.training.run_dir import RunLock, positive_ints, refuse_unresumable
@@ -61,6 +61,8 @@ def check_config(cfg: DictConfig) -> None:
     positive_ints(cfg, "collector.frames_per_batch", "collector.total_frames", "buffer.size", "buffer.batch_size",
                   "eval.episodes", "eval.interval_frames", "checkpoint.interval_frames", "checkpoint.keep_last")
     positive_ints(cfg, "loss.updates_per_batch", "collector.annealing_frames", minimum=0)
+    if cfg.checkpoint.get("snapshot_interval_frames") is not None:
+        positive_ints(cfg, "checkpoint.snapshot_interval_frames")
     if col.total_frames % col.frames_per_batch:
         raise ValueError(f"collector.total_frames={col.total_frames} must be a positive multiple of "
                          f"collector.frames_per_batch={col.frames_per_batch}")
@@ -316,10 +318,12 @@ def _train(cfg: DictConfig, out: Path, created: bool) -> dict:
                                    seed=cfg.seed + state["frames"], ray_address=cfg.ray.address)
         if cfg.threads:
             torch.set_num_threads(cfg.threads)
-        bar = tqdm(total=total, initial=state["frames"], unit="frame", dynamic_ncols=True, disable=not cfg.logger.progress)
+        bar = Progress(total, desc=f"dqn_{cfg.reward.name}", unit="frame", initial=state["frames"],
+                       disable=not cfg.logger.progress)
         last_reward = "—"                  # no episode has ended yet in this process
         start, t_wait = time.perf_counter(), time.perf_counter()
         frames_at_start = state["frames"]
+        snapshot_every = int(cfg.checkpoint.get("snapshot_interval_frames") or 0)
         with running(collector):
             for data in collector:
                 t_collect = time.perf_counter() - t_wait
@@ -388,6 +392,10 @@ def _train(cfg: DictConfig, out: Path, created: bool) -> dict:
                     while state["next_eval"] <= state["frames"]:
                         state["next_eval"] += int(cfg.eval.interval_frames)
                 logger.log_metrics(metrics, step=state["frames"])
+                if snapshot_every and state["frames"] >= state.setdefault("next_snapshot", snapshot_every):
+                    while state["next_snapshot"] <= state["frames"]:
+                        state["next_snapshot"] += snapshot_every
+                    ckpt.snapshot()
                 if state["frames"] >= state["next_checkpoint"] or state["frames"] >= total:
                     while state["next_checkpoint"] <= state["frames"]:
                         state["next_checkpoint"] += int(cfg.checkpoint.interval_frames)

@@ -26,6 +26,7 @@ from mqa_rl.verified_checkpoint import (INTEGRITY, CheckpointCorrupt, IntegrityA
                                         newest_checkpoint, restore_verified)
 
 REPLAY = "replay_buffer"          # left out of a checkpoint saved before the first frame (still empty)
+SNAPSHOTS = "snapshots"           # <run>/snapshots/checkpoint-<frames>: the policy at fixed frame counts
 
 
 class TrainingCheckpoint:
@@ -33,6 +34,8 @@ class TrainingCheckpoint:
                  beta_counter: torch.Tensor, state: dict, keep_last: int = 2):
         self.directory = Path(directory)
         self.rotation = CheckpointRotation(self.directory, keep_last=keep_last)
+        # the learning curve's points: the Q-network and the counters alone (~1 MB each), every one kept
+        self.snapshots = CheckpointRotation(self.directory.parent / SNAPSHOTS, keep_last=1_000_000)
         self.state = state
         self.target_updater = target_updater
         self.beta_counter = beta_counter
@@ -50,6 +53,12 @@ class TrainingCheckpoint:
         if not len(self.replay_buffer):     # before the first frame (demonstration pre-training): nothing to save
             components = [name for name in self.checkpoint.components if name != REPLAY]
         return self.rotation.save(self.checkpoint, step=int(self.state["frames"]), components=components)
+
+    def snapshot(self) -> Path:
+        """Keep the Q-network at the current frame count in ``<run>/snapshots`` (a checkpoint folder that
+        ``evaluate_policy.py checkpoint=`` reads): a learning curve evaluated after the run, never pruned."""
+        return self.snapshots.save(self.checkpoint, step=int(self.state["frames"]),
+                                   components=["policy", "trainer_state", INTEGRITY])
 
     def latest(self) -> Path | None:
         return newest_checkpoint(self.rotation)

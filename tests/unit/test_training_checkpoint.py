@@ -189,3 +189,22 @@ def test_a_checkpoint_holds_no_pickle_and_a_planted_one_is_refused_never_run(tmp
         planted.unlink()
     _reseal(path)
     assert build(tmp_path, "c", seed=2)["ckpt"].load() == path          # the same checkpoint, clean again
+
+
+def test_snapshots_keep_every_curve_point_with_the_network_alone(tmp_path):
+    from torchrl.checkpoint import Checkpoint
+    from mqa_rl.verified_checkpoint import IntegrityAdapter
+    a = build(tmp_path, "a", seed=0)
+    train_a_little(a)
+    first = a["ckpt"].snapshot()
+    a["state"]["frames"] = 24
+    second = a["ckpt"].snapshot()
+    assert first.parent == second.parent == tmp_path / "snapshots" and first != second and first.exists()  # none pruned
+    components = set(Checkpoint.manifest(second)["components"])
+    assert "policy" in components and "replay_buffer" not in components and "optimizer" not in components
+    IntegrityAdapter.verify(second, component="policy")
+    b = build(tmp_path, "b", seed=1)
+    Checkpoint(policy=b["actor"]).load(first, components=["policy"], strict="error")
+    for pa, pb in zip(a["actor"].parameters(), b["actor"].parameters()):
+        assert torch.equal(pa, pb)
+    assert b["ckpt"].latest() is None                      # a snapshot is not a checkpoint a run resumes from
