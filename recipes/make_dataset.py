@@ -4,6 +4,7 @@ then print its summary and draw its answer statistics.
     python recipes/make_dataset.py                          # the default 100-scene dataset
     python recipes/make_dataset.py dataset.seed=1 dataset.out_dir=data/mqa_seed1
     python recipes/make_dataset.py 'dataset.num_scenes={easy: 3, medium: 0, hard: 2}'
+    python recipes/make_dataset.py workers=1                 # settle the scenes in this process alone
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ def main(cfg: DictConfig) -> None:
             bin_spec=OmegaConf.to_container(d.bin),
             overwrite=d.overwrite,
             progress=True,
+            workers=cfg.workers,
         )
         print(f"[make_dataset] generated {out} in {time.perf_counter() - t0:.1f} s")
     print(ds.summary())

@@ -110,6 +110,7 @@ def generate_dataset(
     bin_spec: BinSpec | None = None,
     overwrite: bool = False,
     progress: bool = False,
+    workers: int = 1,
 ) -> "MQADataset":
     """Build the dataset into ``out_dir`` (atomically) and return it loaded.
 
@@ -118,16 +119,18 @@ def generate_dataset(
     a folder of user meshes ``<class>/<instance>/*.obj``, or a list of ``ObjectAsset``.
     ``objects_per_scene`` overrides the paper's object counts per level (for sparser or denser
     scenes). ``bin_spec`` changes the bin (default: 40 × 40 cm, 45 cm walls); the camera is framed
-    on its rim. Everything derives from ``seed``: the same seed gives the same files, byte for byte.
+    on its rim. Everything derives from ``seed``: the same seed gives the same files, byte for byte, whatever
+    ``workers`` (processes settling scenes side by side: each scene depends on the seed and its index alone).
     """
-    from mqa_rl.data.scenes import DIFFICULTIES, drop_config, settle_scene
+    from mqa_rl.data.scenes import DIFFICULTIES, drop_config
     from mqa_rl.data.stats import answer_statistics
-    from mqa_rl.sim.silhouette import silhouettes
 
     num_scenes, per_level = scene_plan(DEFAULT_NUM_SCENES if num_scenes is None else num_scenes,
                                        objects_per_scene, DIFFICULTIES)
     seed, train_fraction = seed_and_fraction(seed, train_fraction)
     bin_spec = _bin(bin_spec)
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ValueError(f"workers={workers!r} must be a positive integer (processes settling scenes; 2 on 2 cores)")
     check_out_dir(out_dir, overwrite)                     # before the work, not after it
     assets, phrases = _library(library)
     names = [a.name for a in assets]
@@ -149,27 +152,19 @@ def generate_dataset(
         for j, s in zip(ids, _split(np.random.default_rng([seed, 1_000_000 + k]), len(ids), train_fraction)):
             split_of[j] = s
 
-    iterator = range(len(plan))
-    if progress:
-        from tqdm import tqdm
-
-        iterator = tqdm(iterator, desc="settling scenes", unit="scene", disable=None)   # None: only on a terminal
+    jobs = [(seed, j, per_level[level]) for j, (level, _) in enumerate(plan)]
+    settled_scenes = _settle_all(jobs, assets, bin_spec, camera, workers, progress)
     scenes, raw_questions, attempts = [], [], []
-    for j in iterator:
+    for j, (indices, poses, tries, under) in enumerate(settled_scenes):
         level, _ = plan[j]
-        rng = np.random.default_rng([seed, j])
-        indices = np.sort(rng.choice(len(assets), per_level[level], replace=False))
-        settled = settle_scene(assets, indices, rng, bin_spec)
-        attempts.append(settled.attempts)
+        attempts.append(tries)
         scene_id = f"scene_{j:03d}"
         chosen = [assets[i] for i in indices]
         objs = [
             {"class": a.class_name, "instance": a.instance_id, "pose": [float(x) for x in p]}
-            for a, p in zip(chosen, settled.poses)
+            for a, p in zip(chosen, poses)
         ]
         scenes.append({"id": scene_id, "difficulty": level, "split": split_of[j], "objects": objs})
-        sil = silhouettes([list(a.collision_parts) for a in chosen], settled.poses, camera)
-        under = under_matrix(sil, settled.poses[:, 2])
         raw_questions += [(scene_id, *q) for q in scene_questions(scene_id, [a.class_name for a in chosen], under, classes, phrases)]
 
     texts = [question_text(t, c, phrases) for _, _, t, c, _ in raw_questions]
@@ -205,6 +200,49 @@ def generate_dataset(
     }
     write_dataset_atomically(Path(out_dir), files, manifest, overwrite=overwrite)
     return MQADataset(out_dir)
+
+
+_WORKER: dict = {}        # the library, bin and camera of a settling process (set once by _init_worker)
+
+
+def _init_worker(assets, bin_spec, camera) -> None:
+    import mqa_rl  # noqa: F401  (a spawned process: the same thread settings as the parent)
+
+    _WORKER.update(assets=assets, bin_spec=bin_spec, camera=camera)
+
+
+def _settle_one(job: tuple[int, int, int]):
+    """Scene ``j`` of ``seed``: its objects' indices, settled poses, drop attempts and which object lies under
+    which (from the silhouettes). Depends on ``(seed, j)`` alone, so scenes settle in any process and order."""
+    from mqa_rl.data.scenes import settle_scene
+    from mqa_rl.sim.silhouette import silhouettes
+
+    seed, j, n_objects = job
+    assets, bin_spec, camera = _WORKER["assets"], _WORKER["bin_spec"], _WORKER["camera"]
+    rng = np.random.default_rng([seed, j])
+    indices = np.sort(rng.choice(len(assets), n_objects, replace=False))
+    settled = settle_scene(assets, indices, rng, bin_spec)
+    chosen = [assets[i] for i in indices]
+    sil = silhouettes([list(a.collision_parts) for a in chosen], settled.poses, camera)
+    return indices, settled.poses, settled.attempts, under_matrix(sil, settled.poses[:, 2])
+
+
+def _settle_all(jobs, assets, bin_spec, camera, workers: int, show: bool) -> list:
+    """Every planned scene settled, in plan order: in this process, or in ``workers`` spawned processes."""
+    from mqa_rl.progress import progress
+
+    def shown(results):
+        return progress(results, total=len(jobs), desc="settling scenes", unit="scene") if show else results
+
+    if workers == 1 or len(jobs) < 2:
+        _init_worker(assets, bin_spec, camera)
+        return list(shown(map(_settle_one, jobs)))
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(min(workers, len(jobs)), mp_context=multiprocessing.get_context("spawn"),
+                             initializer=_init_worker, initargs=(assets, bin_spec, camera)) as pool:
+        return list(shown(pool.map(_settle_one, jobs)))
 
 
 # ----------------------------------------------------------------------------------------- loading

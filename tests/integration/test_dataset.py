@@ -71,10 +71,10 @@ def test_settled_scene_stays_still_when_rebuilt(small_dataset):
     assert moved.max() < 0.002, moved.max()
 
 
-def test_same_seed_same_bytes_other_seed_differs(small_dataset_dir, tmp_path):
+def test_same_seed_same_bytes_in_one_process_or_two_other_seed_differs(small_dataset_dir, tmp_path):
     small = {"easy": 1, "hard": 1}
     a = generate_dataset(tmp_path / "a", seed=3, num_scenes=small).root
-    b = generate_dataset(tmp_path / "b", seed=3, num_scenes=small).root
+    b = generate_dataset(tmp_path / "b", seed=3, num_scenes=small, workers=2).root
     c = generate_dataset(tmp_path / "c", seed=4, num_scenes=small).root
     assert _digest(a) == _digest(b)
     assert (a / "scenes.json").read_bytes() != (c / "scenes.json").read_bytes()
