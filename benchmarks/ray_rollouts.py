@@ -8,7 +8,7 @@ processes, Ray with 2 actors on a local Ray, and Ray on a real two-node cluster 
 this machine's loopback (``ray start`` twice; or the cluster at ``--address``). Every run's records are checked
 bit-identical to the first run's.
 
-Goals (issue 42): 2 nodes x 1 CPU >= 1.7 x the local backend with 1 worker; the Ray backend's overhead against
+Goals: 2 nodes x 1 CPU >= 1.7 x the local backend with 1 worker; the Ray backend's overhead against
 the local pool at equal workers <= 15 %.
 """
 

@@ -1,9 +1,9 @@
-"""Does a learned stop that reads the counting perception stop better? (issue 40, twentieth attempt; again on the
-448-px perception in the twenty-sixth)
+"""Does a learned stop that reads the counting perception stop better? (the countable chain's stop; run on an
+earlier perception file, then again on the 448-px one)
 
-The learned stop reads the push policy's geometry maps; the nineteenth attempt found that remembering their start
-does not help ("what the stop lacks is a better view of the targets"). The counting perception
-(`checkpoints/vqa_counting/perception.pt`, issue 39) is that view: per class, how many objects show above the
+The learned stop reads the push policy's geometry maps; refitted with their change since I_start and their gap below
+the best so far appended, it stopped no better ("what the stop lacks is a better view of the targets"). The counting
+perception (`checkpoints/vqa_counting/perception.pt`) is that view: per class, how many objects show above the
 counter's line. This probe runs the policy's never-stopping episodes on the training split as `recipes/fit_stop.py`
 does, keeps per state the stop features and the perception's reading of the asked class (expected count, count,
 area, largest masses, all classes' count), then refits the stop critic 5-fold by scene with

@@ -8,7 +8,7 @@ The policy pushes greedily without stopping (its best allowed push, ``env.max_pu
 targets' χ are kept (``trajectories/<level>.pt``, written per level: an interrupted run continues with the
 missing levels). ``value=chi`` (the default) stops where the targets' mean χ is lowest; ``value=uncountable`` where
 the fewest targets are below the perfect counter's line (the share of targets a counter misses: what R_c
-rewards, issue 40). ``perception=<file>`` (e.g. ``checkpoints/vqa_counting/perception.pt``) adds its count of the
+rewards). ``perception=<file>`` (e.g. ``checkpoints/vqa_counting/perception.pt``) adds its count of the
 asked class to every state's features (``PerceivedCount``; the env renders the answer camera at the perception's
 size in every state, ~0.2 s each at 448 px). A ``StopCritic`` is fitted by optimal stopping (``mqa_rl.training.optimal_stopping``) on
 the episodes of 80 % of the training scenes and scored on the other 20 % against the fixed rules (stop at
