@@ -5,7 +5,7 @@
 # from its own pushes like the student's (a variant with R_c learns a stop that minimises the targets a counter misses). The paper's variants trained from scratch on our CPU budget do not
 # uncover the targets (docs/results.md, "Where the policy stands"); these start from a policy that does. The RL phase is
 # gentle (profile=dqfd: lr 1e-4, demonstration weight 2.0): at the student's 5e-4 / 0.5 it undid the
-# imitation (docs/notebook/policy_attempts.md, sixteenth and seventeenth attempts).
+# imitation (docs/notebook/policy_attempts.md: the paper's rewards as an RL phase, then the gentle RL phase).
 #
 #   bash tools/train_reward_variants.sh STUDENT_ROOT [OUT_ROOT] [FRAMES] [train_dqn overrides ...]
 #     STUDENT_ROOT  a tools/train_student.sh folder (its dqn/ imitation run and demos_{0,1}/)

@@ -1,10 +1,10 @@
 #!/usr/bin/env bash
-# The learned push policy end to end on 2 CPU cores (14-15 min measured four times; docs/notebook/policy_attempts.md,
-# "Twelfth", "Thirteenth" and "Fifteenth attempt"):
+# The learned push policy end to end on 2 CPU cores (14-15 min measured four times; docs/notebook/policy_attempts.md:
+# the whole student in under 30 minutes, no push twice, the image teacher's students):
 #   1. the image teacher's demonstrations on the train split, two processes at once (2 x 600 states, ~1.5 min)
 #      (MQA_TEACHER=refined: the refined teacher instead, its push the best of 9 simulated starts: 9-11.5 min,
 #       the chain 22-24 min; its students beat random on hard in 3 runs of 5, the image teacher's in 4 of 4;
-#       MQA_TEACHER=countable: the countable teacher (issue 40): the refined oracle reading the full silhouettes,
+#       MQA_TEACHER=countable: the countable teacher: the refined oracle reading the full silhouettes,
 #       serving the least visible target until the perfect counter's 20-px line, stopping when no simulated push
 #       shows the targets better (~1 s per state); the student on R_c (reward=countable), its stop learnt on the
 #       share of targets a counter misses, fit_stop.py value=uncountable)

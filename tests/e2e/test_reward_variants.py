@@ -36,7 +36,7 @@ def test_it_refuses_bad_frames_and_unknown_variants_before_writing(tmp_path):
 
 def test_the_variants_continue_the_students_network_with_a_gentle_rl_phase():
     """The continuation must build the student's network (its checkpoint loads), and only the RL phase's step size
-    and demonstration weight differ: at the student's 5e-4 / 0.5 the RL phase undid the imitation (seventeenth attempt)."""
+    and demonstration weight differ: at the student's 5e-4 / 0.5 the RL phase undid the imitation."""
     student = compose_recipe_config("train_dqn", ["profile=student"])
     variant = compose_recipe_config("train_dqn", ["profile=dqfd", "reward=local"])
     assert variant.model == student.model and variant.env == student.env and variant.buffer == student.buffer

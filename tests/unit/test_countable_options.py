@@ -1,5 +1,5 @@
-"""Issue 40's options refuse what cannot work, before anything runs: the countable teacher's gain check needs
-simulated previews, and a stop can minimise only the measures its trajectories keep."""
+"""The countable chain's options refuse what cannot work, before anything runs: the countable teacher's gain check
+needs simulated previews, and a stop can minimise only the measures its trajectories keep."""
 
 import pytest
 import torch
