@@ -189,7 +189,41 @@ def calibrated_counter(train_store: Path, test: TensorDict) -> dict:
             "counter_calibrated_either": ans.accuracy_table(ans.calibrated_counter_right(train, test, ans.EITHER), test)}
 
 
+def read_stored(path) -> dict | None:
+    """The stored result of a larger evaluation to show beside this one (``stored_results``), or None."""
+    if not path:
+        return None
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"stored_results={path} does not exist: give a results file like "
+                                f"checkpoints/vqa_counting/test_split_results.json, or stored_results=null")
+    try:
+        stored = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise ValueError(f"stored_results={path} is not readable JSON ({error}): give a results file like "
+                         f"checkpoints/vqa_counting/test_split_results.json, or stored_results=null") from error
+    if not isinstance(stored, dict) or not isinstance(stored.get("systems"), dict) or "command" not in stored:
+        raise ValueError(f"stored_results={path} has no 'systems' and 'command' entries: it is not a stored Table III "
+                         f"(see checkpoints/vqa_counting/test_split_results.json)")
+    return stored
+
+
+def report_markdown(cfg: DictConfig, head: str, t3: str, paired: str, reading: list[str], stored: dict | None) -> str:
+    """The page a reader opens first: Table III beside the paper's, every system against no manipulation and random
+    paired by question, which system answers best, what this sample can separate, where the figure and videos are."""
+    parts = ["# Table III, as measured", "", head, "", t3, "", "![Table III](table3.png)", "",
+             "## Paired by question, 95 % intervals by scene (bold: beyond noise)", "", paired, "", *reading, ""]
+    if stored:
+        parts += [f"Stored, full test split: {stored.get('what', '')}; made by `{stored['command']}`.", ""]
+    parts += ["Also here: `by_scene.md` (every difference with its scene count), `per_type.md`, `policy.md` (pushes, χ, "
+              "perfect counters), `table3.csv`, `results.json`."]
+    if cfg.get("videos_dir"):
+        parts += [f"Videos of episodes with the Q-network's map: `{cfg.videos_dir}`."]
+    return "\n".join(parts) + "\n"
+
+
 def evaluate(cfg: DictConfig) -> dict:
+    stored = read_stored(cfg.stored_results)       # before minutes of collecting
     ds = MQADataset(cfg.dataset)
     names = list(cfg.report) if cfg.report else list(cfg.systems)
     unknown = [n for n in names if n not in cfg.systems]
@@ -233,7 +267,7 @@ def evaluate(cfg: DictConfig) -> dict:
                     lv: ans.paired_difference_by_scene(right, records, n_right[n_mask], n_rec[n_mask],
                                                        mask_a=counting & (records.get(keys.LEVEL) == i))
                     for i, lv in enumerate(LEVELS)}
-                # what the policy's stop leaves a perfect counter, against not pushing (issue 40's measure)
+                # what the policy's stop leaves a perfect counter, against not pushing
                 results["systems"][name]["counter_stop_vs_no_manipulation_by_scene"] = {
                     lv: ans.paired_difference_by_scene(ans.counter_right(records, ds.answers, keys.LAST), records,
                                                        n_counter, n_rec[n_mask],
@@ -263,12 +297,14 @@ def evaluate(cfg: DictConfig) -> dict:
 
     out = Path(cfg.out_dir)
     head = (f"COUNTING accuracy on the test split of {cfg.dataset} ({cfg.questions.name} questions, VQA {cfg.vqa.name}), ± Wilson 95 % "
-            f"half-width; paper: Table III of Deng et al. 2021")
+            f"half-width; paper: Table III of Deng et al. (RSS 2021)")
     t3 = report.table3_markdown(results)
-    verdict = report.verdict(results)
-    write_atomic(out / "table3.md", f"{head}\n\n{t3}\n\n" + "\n".join(f"- {v}" for v in verdict) + "\n")
+    paired = report.paired_markdown(results, stored)
+    reading = [report.best_line(results, stored), report.sample_line(results)]
+    write_atomic(out / "table3.md", f"{head}\n\n{t3}\n")
     write_atomic(out / "table3.csv", report.rows_csv(results))
     report.table3_figure(results, out / "table3.png")
+    write_atomic(out / "report.md", report_markdown(cfg, head, t3, paired, reading, stored))
     per_type = report.per_type_markdown(results)
     write_atomic(out / "per_type.md", f"Accuracy per question type and level (± Wilson 95 %)\n\n{per_type}\n")
     policy = report.policy_markdown(results)
@@ -284,8 +320,8 @@ def evaluate(cfg: DictConfig) -> dict:
             plot_curves.plot(runs, out / "fig7_rewards.png")
     write_atomic(out / "by_scene.md", report.by_scene_markdown(results))
     write_atomic(out / "results.json", json.dumps(results, indent=1, default=float))
-    print(f"\n{head}\n\n{t3}\n")
-    print("\n".join(verdict))
+    print(f"\n{head}\n\n{t3}\n\n{paired}\n")
+    print("\n".join(reading))
     print(f"\n{per_type}\n\n{policy}\n\nwritten to {out}")
     return results
 

@@ -33,7 +33,6 @@ import numpy as np
 import torch
 from tensordict import TensorDict
 from torchrl.envs.utils import set_exploration_type
-from tqdm import tqdm
 
 from mqa_rl import keys
 from mqa_rl.data.dataset import LEVELS, MQADataset, dataset_fingerprint
@@ -43,6 +42,7 @@ from mqa_rl.collectors.store import EpisodeStore
 from mqa_rl.envs.sapien_bin import SapienBinEnv
 from mqa_rl.modules.frozen_policies import is_deterministic, make_frozen_policy, resolve_checkpoint
 from mqa_rl.modules.kept_frame import FrameKeeper, episode_states, reading_env_options
+from mqa_rl.progress import Progress
 from mqa_rl.transforms.episode_stats import mean_target_chi
 from mqa_rl.transforms.mqa_env import make_mqa_env
 
@@ -259,8 +259,7 @@ def collect_rollouts(out_dir, *, dataset, policy, split: str, question_types=("c
         else:
             pool = mp.get_context("spawn").Pool(min(workers, len(todo)), initializer=_worker_init,
                                                 initargs=(*build, os.getpid()))
-        bar = tqdm(total=len(tasks), initial=len(done), unit="episode", dynamic_ncols=True, disable=not progress,
-                   desc=f"{spec['kind']} {split}")
+        bar = Progress(len(tasks), f"{spec['kind']} {split}", unit="episode", initial=len(done), disable=not progress)
         buffer: list[TensorDict] = []
         try:
             for record in pool.imap_unordered(_worker_episode, todo, chunksize=1):

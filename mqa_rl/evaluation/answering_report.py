@@ -16,7 +16,7 @@ import math
 from pathlib import Path
 
 from mqa_rl.data.dataset import LEVELS
-from mqa_rl.evaluation.paper import PAPER_BEST, PAPER_NAMES, TABLE_III, VARIANT_FAMILIES
+from mqa_rl.evaluation.paper import PAPER_NAMES, TABLE_III
 from mqa_rl.files import write_atomic
 
 # the perfect counters of a system's results, in the order policy.md and table3.csv show them
@@ -73,29 +73,82 @@ def table3_markdown(results: dict, qtype: str = "counting") -> str:
     return "\n".join(lines)
 
 
-def verdict(results: dict, qtype: str = "counting") -> list[str]:
-    """The answering goals, checked level by level on the measured table for each family of the three reward
-    variants present (the paper's DQN, ours from demonstrations; missing systems say so)."""
-    ok = {n: r for n, r in results["systems"].items() if r["status"] == "ok"}
-    families = {f: [n for n in names if n in ok] for f, names in VARIANT_FAMILIES.items()}
-    families = {f: names for f, names in families.items() if names}
-    if not families:
-        named = ", ".join(n for names in VARIANT_FAMILIES.values() for n in names)
-        return ["no DQN system evaluated yet: the goals (every DQN variant beats random, the best beats the paper's "
-                f"best) are checked on the systems named {named}; other systems are tabled, not checked"]
-    out = []
-    for family, dqn in families.items():
+BASELINES = ("no_manipulation", "random")     # what every other system is paired against, by question
+STORED_KEYS = {"no_manipulation": "vs_no_manipulation", "random": "vs_random"}
+
+
+def _interval(diff) -> str:
+    """``+0.044 [+0.006, +0.089]``, bold when the interval excludes zero; empty without a measurement."""
+    if not diff or len(diff) < 3 or not all(isinstance(v, (int, float)) and math.isfinite(v) for v in diff[:3]):
+        return ""
+    text = f"{diff[0]:+.3f} [{diff[1]:+.3f}, {diff[2]:+.3f}]"
+    return f"**{text}**" if diff[1] > 0 or diff[2] < 0 else text
+
+
+def paired_markdown(results: dict, stored: dict | None = None) -> str:
+    """Every evaluated system − each baseline, COUNTING, per level, paired by question with 95 % intervals that
+    resample whole scenes; beside it the stored full-test-split difference where ``stored`` has it."""
+    head = "| system − baseline | " + " | ".join(LEVELS) + (" | stored, full test split: " + " / ".join(LEVELS)
+                                                          if stored else "") + " |"
+    lines = [head, "|---|" + "---|" * (len(LEVELS) + bool(stored))]
+    for name, res in results["systems"].items():
+        if res["status"] != "ok" or name in BASELINES:
+            continue
+        for base in BASELINES:
+            measured = res.get(f"vs_{base}_by_scene")
+            if not measured:
+                continue
+            row = f"| {_label(name)} − {base.replace('_', ' ')} | " + " | ".join(_interval(measured.get(lv)) for lv in LEVELS)
+            if stored:
+                kept = ((stored.get("systems") or {}).get(name) or {}).get(STORED_KEYS[base]) or {}
+                row += " | " + (" / ".join(_interval(kept.get(lv)) or "—" for lv in LEVELS) if kept else "—")
+            lines.append(row + " |")
+    return "\n".join(lines)
+
+
+def sample_line(results: dict) -> str:
+    """What this many questions can separate: the mean half-width of the paired intervals by scene, per level."""
+    widths: dict[str, list[float]] = {lv: [] for lv in LEVELS}
+    counts: dict[str, tuple[int, int]] = {}
+    for name, res in results["systems"].items():
+        if res["status"] != "ok":
+            continue
         for lv in LEVELS:
-            acc = {n: ok[n]["accuracy"].get(qtype, {}).get(lv, {}).get("accuracy", math.nan) for n in dqn}
-            best = max(acc, key=lambda n: acc[n])
-            beats_paper = acc[best] > PAPER_BEST[lv]
-            text = (f"{lv}: best {family} {best} {acc[best]:.3f} {'>' if beats_paper else '<='} the paper's best "
-                    f"{PAPER_BEST[lv]:.3f}")
-            if "random" in ok:
-                worse = [n for n in dqn if not ok[n]["vs_random"][lv][0] > 0]
-                text += f"; every {family} variant above random" if not worse else f"; not above random: {', '.join(worse)}"
-            out.append(text)
-    return out
+            cell = res["accuracy"].get("counting", {}).get(lv)
+            scenes = res.get("accuracy_by_scene", {}).get(lv)
+            if cell and scenes:
+                counts[lv] = (cell["n"], scenes[3])
+            for base in BASELINES:
+                diff = res.get(f"vs_{base}_by_scene", {}).get(lv)
+                if diff and diff[3] and math.isfinite(diff[1]) and math.isfinite(diff[2]):
+                    widths[lv].append((diff[2] - diff[1]) / 2)
+    half = {lv: sum(w) / len(w) for lv, w in widths.items() if w}
+    if not half:
+        return "No paired difference was measured (evaluate no_manipulation or random beside the other systems)."
+    sizes = ", ".join(f"{lv} {counts[lv][0]} questions on {counts[lv][1]} scenes" for lv in LEVELS if lv in counts)
+    spans = " / ".join(f"±{half[lv]:.2f}" for lv in LEVELS if lv in half)
+    return (f"This sample ({sizes}) separates a paired difference from zero only when it exceeds about {spans} "
+            f"(easy / medium / hard, the mean half-width of its intervals); smaller differences need more questions.")
+
+
+def best_line(results: dict, stored: dict | None = None) -> str:
+    """Which system answers best: the highest COUNTING accuracy averaged over the levels, here and stored."""
+    def ranked(table: dict[str, dict[str, float]]) -> list[tuple[float, str]]:
+        return sorted(((sum(acc[lv] for lv in LEVELS) / len(LEVELS), n) for n, acc in table.items()
+                       if all(lv in acc for lv in LEVELS)), reverse=True)
+
+    here = ranked({n: {lv: r["accuracy"]["counting"][lv]["accuracy"] for lv in LEVELS
+                       if lv in r["accuracy"].get("counting", {})}
+                   for n, r in results["systems"].items() if r["status"] == "ok"})
+    if not here:
+        return "No system was evaluated."
+    line = "Answers best on this sample (mean COUNTING accuracy over the levels): " + ", then ".join(
+        f"{_label(n)} {m:.3f}" for m, n in here[:3]) + "."
+    if stored:
+        kept = ranked({n: s.get("accuracy", {}) for n, s in (stored.get("systems") or {}).items()})
+        if kept:
+            line += " Stored, full test split: " + ", then ".join(f"{_label(n)} {m:.3f}" for m, n in kept[:3]) + "."
+    return line
 
 
 def per_type_markdown(results: dict) -> str:

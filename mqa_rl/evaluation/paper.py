@@ -1,4 +1,4 @@
-"""The paper's reported numbers (Deng et al., ICRA 2021), to print beside ours."""
+"""The paper's reported numbers (Deng et al., RSS 2021, arXiv 2003.04641), to print beside ours."""
 
 # Table III: COUNTING accuracy on the test split per level, by manipulation policy.
 TABLE_III = {
@@ -10,10 +10,3 @@ TABLE_III = {
 # the paper's names of our systems
 PAPER_NAMES = {"random": "random", "dqn_global": "DQN(R_g)", "dqn_local": "DQN(R_l)", "dqn_global_local": "DQN(R_g+R_l)",
                "dqfd_global": "DQfD(R_g)", "dqfd_local": "DQfD(R_l)", "dqfd_global_local": "DQfD(R_g+R_l)"}
-# the paper's three reward variants, as trained (the paper's DQN from scratch, and ours from demonstrations):
-# Table III's goals are checked for each family present
-VARIANT_FAMILIES = {"DQN": ("dqn_global", "dqn_local", "dqn_global_local"),
-                    "DQfD": ("dqfd_global", "dqfd_local", "dqfd_global_local")}
-# the best of the paper's DQN variants at each level (what the answering goal asks the best variant to beat)
-PAPER_BEST = {level: max(TABLE_III[s][level] for s in ("dqn_global", "dqn_local", "dqn_global_local"))
-              for level in ("easy", "medium", "hard")}

@@ -201,26 +201,48 @@ def test_evaluate_from_the_command_line(trained, tmp_path):
                          cwd=tmp_path, capture_output=True, text=True, timeout=600, env=env)
     assert out.returncode == 0, out.stderr[-3000:]
     assert "| random |" in out.stdout and (tmp_path / "report" / "table3.md").exists()
+    page = (tmp_path / "report" / "report.md").read_text()
+    assert "| DQN(R_g)" in page or "dqn_global (DQN(R_g)) − random" in page      # paired with random, by scene
+    assert "table3.png" in page and "goal" not in page.lower() and "issue" not in page.lower()
 
 
-def test_the_goals_are_checked_for_each_family_of_reward_variants():
-    from mqa_rl.evaluation.answering_report import verdict
+def test_the_report_pairs_every_system_with_the_baselines_says_which_answers_best_and_what_the_sample_separates():
+    from mqa_rl.evaluation.answering_report import best_line, paired_markdown, sample_line
 
-    def system(acc, vs_random):
-        return {"status": "ok", "accuracy": {"counting": {lv: {"accuracy": acc} for lv in ("easy", "medium", "hard")}},
-                "vs_random": {lv: (vs_random, 0.05, 100) for lv in ("easy", "medium", "hard")}}
+    levels = ("easy", "medium", "hard")
 
-    results = {"systems": {"random": system(0.40, 0.0), "dqn_global": system(0.38, -0.02),
-                           "dqfd_global": system(0.60, 0.2), "dqfd_local": system(0.55, 0.15),
-                           "dqfd_global_local": {"status": "missing", "reason": "no checkpoint"}}}
-    lines = verdict(results)
-    assert len(lines) == 6                                   # two families present, three levels each
-    assert lines[0].startswith("easy: best DQN dqn_global 0.380 <= the paper's best 0.477")
-    assert lines[0].endswith("not above random: dqn_global")
-    assert lines[3].startswith("easy: best DQfD dqfd_global 0.600 > the paper's best 0.477")
-    assert lines[3].endswith("every DQfD variant above random")
-    assert verdict({"systems": {"random": system(0.4, 0.0)}})[0].startswith("no DQN system evaluated yet")
-    assert "dqfd_global_local" in verdict({"systems": {"random": system(0.4, 0.0)}})[0]   # says which names count
+    def system(acc, vs_none=None, vs_random=None, n=30, scenes=9):
+        res = {"status": "ok", "accuracy": {"counting": {lv: {"accuracy": acc, "n": n} for lv in levels}},
+               "accuracy_by_scene": {lv: (acc, acc - 0.1, acc + 0.1, scenes) for lv in levels}}
+        if vs_none is not None:
+            res["vs_no_manipulation_by_scene"] = {lv: vs_none for lv in levels}
+        if vs_random is not None:
+            res["vs_random_by_scene"] = {lv: vs_random for lv in levels}
+        return res
+
+    results = {"systems": {"no_manipulation": system(0.70, vs_random=(0.02, -0.08, 0.12, 9)),
+                           "random": system(0.68, vs_none=(-0.02, -0.12, 0.08, 9)),
+                           "privileged": system(0.80, vs_none=(0.10, 0.02, 0.18, 9), vs_random=(0.12, 0.04, 0.20, 9)),
+                           "dqn_global": {"status": "missing", "reason": "no checkpoint"}}}
+    stored = {"command": "python recipes/evaluate.py ...", "systems": {
+        "privileged": {"accuracy": {"easy": 0.95, "medium": 0.78, "hard": 0.69},
+                       "vs_no_manipulation": {"easy": [0.044, 0.017, 0.078], "medium": [0.089, 0.022, 0.144],
+                                              "hard": [0.083, 0.017, 0.150]}},
+        "no_manipulation": {"accuracy": {"easy": 0.90, "medium": 0.69, "hard": 0.60}}}}
+    table = paired_markdown(results, stored)
+    rows = [line for line in table.splitlines() if line.startswith("| privileged")]
+    assert len(rows) == 2                                   # − no manipulation, − random; baselines not paired with themselves
+    assert "**+0.100 [+0.020, +0.180]**" in rows[0]        # beyond noise: bold
+    assert "**+0.044 [+0.017, +0.078]**" in rows[0] and rows[1].endswith("| — |")   # stored beside; none against random
+    assert "dqn_global" not in table
+    assert "| random − " not in table and "no manipulation −" not in table
+    assert "+0.020 [-0.080" not in table
+    best = best_line(results, stored)
+    assert best.startswith("Answers best on this sample (mean COUNTING accuracy over the levels): privileged 0.800")
+    assert "Stored, full test split: privileged 0.807" in best
+    line = sample_line(results)
+    assert "easy 30 questions on 9 scenes" in line and "±0.09 / ±0.09 / ±0.09" in line
+    assert "No paired difference" in sample_line({"systems": {"privileged": system(0.8)}})
 
 
 def test_evaluate_collects_the_answer_cameras_frames_a_finer_vqa_reads(small_dataset, answering_root, tmp_path, monkeypatch):

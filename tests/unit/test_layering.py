@@ -10,7 +10,7 @@ PACKAGE = REPO / "mqa_rl"
 
 # Bottom first. A package may import from a lower layer, never from its own layer's others or from above.
 LAYERS = (
-    ("keys", "files"),                          # names and file formats
+    ("keys", "files", "progress"),              # names, file formats, progress lines
     ("verified_checkpoint",),                   # checkpoints checked before they are read
     ("sim",),                                   # geometry, SAPIEN scene, pushers
     ("data",),                                  # objects, scenes, questions
