@@ -6,6 +6,7 @@
     python recipes/evaluate_policy.py run=... 'policies=[greedy,random,image_teacher]'   # + its teacher
     python recipes/evaluate_policy.py run=... split=train stop_margin=0.5   # choose a stop margin on training scenes
     python recipes/evaluate_policy.py run=... stop_critic=runs/stop/x    # stop learnt by recipes/fit_stop.py
+    python recipes/evaluate_policy.py run=... snapshots=true dataset=data/mqa_val   # the learning curve, every snapshot
 
 Per level and policy, over the same questions (the env is seeded alike for every policy): mean
 episode reward, pushes, fraction of episodes ending in a simple scene, change of the targets' mean
@@ -38,6 +39,7 @@ from mqa_rl.collectors.ray_pool import check_backend
 from mqa_rl.data.dataset import MQADataset
 from mqa_rl.envs.video import write_video
 from mqa_rl.evaluation.episode_metrics import mean_ci95, scene_bootstrap_ci95
+from mqa_rl.evaluation.learning_curve import plot_learning_curves, run_snapshots
 from mqa_rl.evaluation.policy_units import POLICIES, close_envs, run_units
 from mqa_rl.files import load_tensors, write_atomic
 from mqa_rl.modules.kept_frame import reading_env_options
@@ -115,8 +117,8 @@ def reuse_episodes(folder, name: str, meta: dict, needs: tuple[str, ...] = ()) -
     return metrics
 
 
-@hydra.main(config_path="conf", config_name="evaluate_policy", version_base="1.3")
-def main(cfg: DictConfig) -> None:
+def evaluate(cfg: DictConfig) -> dict:
+    """Every policy of ``cfg.policies`` on the same questions per level; writes and returns the results."""
     out = Path(cfg.out_dir)
     out.mkdir(parents=True, exist_ok=True)
     check_backend(cfg.backend)
@@ -189,6 +191,38 @@ def main(cfg: DictConfig) -> None:
         write_atomic(out / name, text)
     print("\n".join(lines))
     print(f"written to {out}")
+    return results
+
+
+def evaluate_snapshots(cfg: DictConfig) -> list[tuple[int, dict]]:
+    """The learning curve: greedy at every snapshot of the run (``<run>/snapshots``, kept by train_dqn.py's
+    ``checkpoint.snapshot_interval_frames``) against the other policies on the same questions, each in
+    ``<out_dir>/frames-<N>``; the other policies' episodes run once and are reused. Writes ``curve.json`` and
+    ``curve.png`` (greedy − each other policy, per level, 95 % by scene) to ``out_dir``."""
+    if not cfg.run or cfg.checkpoint:
+        raise ValueError("snapshots=true evaluates every snapshot of run=<a train_dqn.py run>: give run=, leave checkpoint=null")
+    snapshots = run_snapshots(cfg.run)
+    if not snapshots:
+        raise FileNotFoundError(f"{cfg.run} has no snapshots/checkpoint-*: train it with checkpoint.snapshot_interval_frames=<N> "
+                                f"(profile=paper_cpu keeps one every 1,000 frames)")
+    out = Path(cfg.out_dir)
+    first = out / f"frames-{snapshots[0][0]:07d}"
+    points = []
+    for frames, path in snapshots:
+        print(f"=== snapshot at {frames} frames: {path}", flush=True)
+        at = OmegaConf.merge(cfg, {"checkpoint": str(path), "out_dir": str(out / f"frames-{frames:07d}"),
+                                   "baseline_from": str(first) if frames != snapshots[0][0] else cfg.baseline_from})
+        points.append((frames, evaluate(at)))
+    write_atomic(out / "curve.json", json.dumps({"run": str(cfg.run), "points": [{"frames": f, "results": r} for f, r in points]},
+                                                indent=1))
+    plot_learning_curves({Path(cfg.run).name: points}, out / "curve.png")
+    print(f"learning curve: {out / 'curve.json'}, {out / 'curve.png'}")
+    return points
+
+
+@hydra.main(config_path="conf", config_name="evaluate_policy", version_base="1.3")
+def main(cfg: DictConfig) -> None:
+    evaluate_snapshots(cfg) if cfg.snapshots else evaluate(cfg)
 
 
 def record_unit(out: Path, meta: dict, video_format: str, unit: tuple[str, str], result) -> dict:

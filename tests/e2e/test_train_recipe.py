@@ -32,8 +32,10 @@ def _scalars(run: Path, name: str) -> list[tuple[float, float]]:
 @pytest.mark.timeout(900)
 def test_tiny_training_run_evaluation_and_curves(small_dataset_dir, tmp_path):
     run = tmp_path / "run"
-    out = _run(TRAIN, "profile=smoke", f"dataset={small_dataset_dir}", f"out_dir={run}", "threads=1", cwd=tmp_path)
+    out = _run(TRAIN, "profile=smoke", f"dataset={small_dataset_dir}", f"out_dir={run}", "threads=1",
+               "checkpoint.snapshot_interval_frames=16", cwd=tmp_path)
     assert "done: {'frames': 32, 'updates': 6" in out.stdout
+    assert sorted(p.name for p in (run / "snapshots").iterdir()) == ["checkpoint-000000000016", "checkpoint-000000000032"]
     for name in ("train/reward", "train/loss", "train/mean_q", "train/epsilon", "train/beta", "train/pushes",
                  "train/stop_rate", "train/chi_start", "train/chi_end", "time/env_steps_per_s", "time/updates_per_s",
                  "eval/reward", "eval/hidden_end", "train/term/exploration"):
@@ -53,6 +55,13 @@ def test_tiny_training_run_evaluation_and_curves(small_dataset_dir, tmp_path):
     assert changed.returncode != 0 and "optim.lr: 0.0005 -> 0.123" in changed.stderr
     assert "resume_allow_changes=true" in changed.stderr and "total_frames: " not in changed.stderr
     assert list((run / "checkpoints").glob("checkpoint-*32")) and not list((run / "checkpoints").glob("checkpoint-*40"))
+    # the learning curve: greedy at every snapshot against random on the same questions, random run once
+    curve = tmp_path / "curve"
+    out_curve = _run(str(ROOT / "recipes" / "evaluate_policy.py"), f"run={run}", "snapshots=true", "episodes_per_level=1",
+                     "difficulties=[easy]", "policies=[greedy,random]", "video_episodes=0", f"out_dir={curve}", cwd=tmp_path)
+    points = json.loads((curve / "curve.json").read_text())["points"]
+    assert [p["frames"] for p in points] == [16, 32] and "greedy-random" in points[1]["results"]["easy"]
+    assert out_curve.stdout.count("random: reused") == 1 and (curve / "curve.png").stat().st_size > 0
     # greedy vs random on the test split, and the Fig. 7 curves
     ev = tmp_path / "eval"
     _run(str(ROOT / "recipes" / "evaluate_policy.py"), f"run={run}", "episodes_per_level=2", "difficulties=[easy]",
