@@ -40,37 +40,17 @@ from mqa_rl.data.dataset import MQADataset
 from mqa_rl.envs.video import write_video
 from mqa_rl.evaluation.episode_metrics import mean_ci95, scene_bootstrap_ci95
 from mqa_rl.evaluation.learning_curve import plot_learning_curves, run_snapshots
+from mqa_rl.evaluation.unit_reuse import content_digest, episodes_meta, greedy_identity, reuse_episodes
 from mqa_rl.evaluation.policy_units import POLICIES, close_envs, run_units
-from mqa_rl.files import load_tensors, write_atomic
+from mqa_rl.files import write_atomic
 from mqa_rl.modules.kept_frame import reading_env_options
-from mqa_rl.modules.perceived_count import file_sha256
-from mqa_rl.modules.trained_policy import newest_run_checkpoint, read_run_config
+from mqa_rl.modules.trained_policy import read_run_config
+from mqa_rl.training.run_dir import RunLock
 from mqa_rl.transforms.push_memory import memory_radius
-from mqa_rl.verified_checkpoint import component_digest
 
 REPORTED = ("reward", "pushes", "final_simple", "chi_end", "chi_change", "hidden_end", "into_view", "out_of_view",
             "countable_gain", "counter_stop", "counter_either", "idle_pushes", "stopped")
 KEPT_REPORTED = ("counter_kept", "countable_gain_kept", "chi_kept", "hidden_kept")     # with kept_frame=
-
-
-def episodes_meta(cfg: DictConfig, dataset, level: str, qtypes, max_pushes: int, reward: dict,
-                  push_memory: int | None = None) -> dict:
-    """What makes two evaluations' episodes the same questions (and the same reward)."""
-    return {"dataset": str(Path(dataset).resolve()), "split": cfg.split, "seed": int(cfg.seed), "level": level,
-            "episodes": int(cfg.episodes_per_level), "max_pushes": max_pushes, "pusher": cfg.pusher,
-            "question_types": list(qtypes) if qtypes else None, "reward": reward, "push_memory": push_memory}
-
-
-def greedy_identity(cfg: DictConfig) -> dict | None:
-    """What makes two evaluations' greedy episodes the same policy: its weights (their digest in the checkpoint's
-    integrity record), its stopping rule and the frame it answers from (None when the run has no checkpoint yet)."""
-    checkpoint = Path(cfg.checkpoint) if cfg.checkpoint else newest_run_checkpoint(cfg.run)
-    if checkpoint is None:
-        return None
-    stop = Path(cfg.stop_critic) / "stop_critic.pt" if cfg.stop_critic else None
-    return {"weights": component_digest(checkpoint, "policy"), "stop_margin": cfg.stop_margin,
-            "stop_critic": file_sha256(stop) if stop and stop.is_file() else cfg.stop_critic,
-            "kept_frame": file_sha256(cfg.kept_frame) if cfg.kept_frame and Path(cfg.kept_frame).is_file() else cfg.kept_frame}
 
 
 def shown(stat: dict, sep: str = " ± ") -> str:
@@ -93,39 +73,26 @@ def statistics(values: torch.Tensor, scenes: torch.Tensor | None) -> dict:
     return out
 
 
-def reuse_episodes(folder, name: str, meta: dict, needs: tuple[str, ...] = ()) -> dict[str, torch.Tensor] | None:
-    """The per-episode metrics of policy ``name`` from an earlier evaluation (or this one, killed), if on the same
-    questions and holding the metrics ``needs`` names (a kept frame's, which an evaluation without one did not record)."""
-    path = Path(folder) / "episodes" / f"{name}_{meta['level']}.pt"
-    if not path.is_file():
-        return None
-    saved = load_tensors(path, what="baseline episodes file", hint="delete it to evaluate again")
-    # the reward is checked below; the paper's random never reads the action mask, so PushMemory leaves it alone
-    ignored = ("reward", "push_memory") if name == "random" else ("reward",)
-    same = {k: v for k, v in meta.items() if k not in ignored}
-    if {k: saved["meta"].get(k) for k in same} != same:
-        print(f"  {path}: other questions or settings, not reused")
-        return None
-    metrics = dict(saved["metrics"])
-    lacking = [k for k in needs if k not in metrics]
-    if lacking:
-        print(f"  {path}: no {', '.join(lacking)} (run without kept_frame=), not reused")
-        return None
-    if saved["meta"].get("reward") != meta["reward"]:   # another reward config: its rewards don't compare
-        metrics = {k: v for k, v in metrics.items() if k != "reward" and not k.startswith("term/")}
-    print(f"  {name}: reused {path}")
-    return metrics
-
-
 def evaluate(cfg: DictConfig) -> dict:
-    """Every policy of ``cfg.policies`` on the same questions per level; writes and returns the results."""
+    """Every policy of ``cfg.policies`` on the same questions per level; writes and returns the results. One writer
+    per ``out_dir`` (a second evaluation into it is refused at once)."""
+    with RunLock(Path(cfg.out_dir), "evaluate_policy.py"):
+        return _evaluate(cfg)
+
+
+def _evaluate(cfg: DictConfig) -> dict:
     out = Path(cfg.out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     check_backend(cfg.backend)
     if "greedy" in cfg.policies and not cfg.run:
         raise ValueError("the greedy policy needs run=<a recipes/train_dqn.py output folder>")
     if cfg.stop_margin is not None and cfg.stop_critic is not None:
         raise ValueError("stop_margin and stop_critic are two stopping rules: give one of them")
+    if cfg.stop_margin is not None:
+        try:
+            float(cfg.stop_margin)
+        except (TypeError, ValueError):
+            raise ValueError(f"stop_margin={cfg.stop_margin!r} must be a number (e.g. 0.5), inf (never stop) or null "
+                             f"(plain greedy)") from None
     unknown = [p for p in cfg.policies if p not in POLICIES]
     if unknown:
         raise ValueError(f"unknown policy {unknown[0]!r}; choose among {', '.join(POLICIES)}")
@@ -152,7 +119,8 @@ def evaluate(cfg: DictConfig) -> dict:
     metrics: dict = {}
     units = []
     identity = greedy_identity(cfg) if "greedy" in cfg.policies else None
-    metas = {(level, name): episodes_meta(cfg, dataset, level, qtypes, max_pushes, reward, push_memory)
+    kept = content_digest(cfg.kept_frame, "kept_frame")
+    metas = {(level, name): episodes_meta(cfg, dataset, level, qtypes, max_pushes, reward, push_memory, kept)
              | ({"policy": identity} if name == "greedy" else {}) for level in cfg.difficulties for name in cfg.policies}
     needs = KEPT_REPORTED if cfg.kept_frame else ()          # a kept-frame evaluation reports them for every policy
     for (level, name), meta in metas.items():

@@ -29,7 +29,7 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 
 from mqa_rl import keys
-from mqa_rl.data.dataset import MQADataset
+from mqa_rl.data.dataset import MQADataset, dataset_fingerprint
 from mqa_rl.files import load_tensors, write_atomic
 from mqa_rl.modules.learned_stop import FEATURES, policy_fingerprint, policy_net, reading_env_kwargs, stop_features
 from mqa_rl.modules.perceived_count import READING, PerceivedCount, token_channels
@@ -129,7 +129,7 @@ def main(cfg: DictConfig) -> None:
             actor, _, checkpoint = load_greedy(run, cfg.checkpoint, env)
             net = policy_net(actor)
             meta = {"run": str(run.resolve()), "checkpoint": Path(checkpoint).name, "policy_fingerprint": policy_fingerprint(net),
-                    "dataset": str(Path(dataset).resolve()), "split": cfg.split, "level": level, "seed": int(cfg.seed),
+                    "dataset": dataset_fingerprint(dataset), "split": cfg.split, "level": level, "seed": int(cfg.seed),
                     "episodes": int(cfg.episodes_per_level), "max_pushes": max_pushes, "push_memory": push_memory,
                     "measures": list(VALUES), **({"perception": reading.sha256} if reading else {})}
             path = out / "trajectories" / f"{level}.pt"
