@@ -66,12 +66,51 @@ def refuse_pickles(folder: str | Path, *, what: str, hint: str) -> None:
                                  f"(it could run any code): mqa_rl writes tensors and JSON only; {hint}")
 
 
+class TruncatedFile(ValueError):
+    """A memmap file shorter (or longer) than its ``meta.json`` says: mapped as it is, its missing bytes would read
+    as zeros (an interrupted copy, a full disk)."""
+
+
+def check_memmap_sizes(folder: str | Path, *, what: str, hint: str) -> None:
+    """Every tensor file under a ``TensorDict.memmap`` folder holds the bytes its ``meta.json`` shape and dtype
+    need; an unreadable or missing ``meta.json`` is named too. Raises ``TruncatedFile`` / ``ValueError``."""
+    import json
+    import math
+
+    import torch
+
+    folder = Path(folder)
+    if not (folder / "meta.json").is_file():
+        raise ValueError(f"{what} {folder} has no meta.json (an empty or half-copied folder): {hint}")
+    for meta_path in sorted(folder.rglob("meta.json")):
+        try:
+            meta = json.loads(meta_path.read_text())
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
+            raise ValueError(f"{what}: {meta_path} is not readable JSON ({type(error).__name__}: {error}): {hint}") from None
+        for key, entry in meta.items():
+            if not (isinstance(entry, dict) and "shape" in entry and "dtype" in entry) or entry.get("is_nested"):
+                continue
+            dtype = getattr(torch, str(entry["dtype"]).removeprefix("torch."), None)
+            if not isinstance(dtype, torch.dtype):
+                raise ValueError(f"{what}: {meta_path} names an unknown dtype {entry['dtype']!r} for {key}: {hint}")
+            need = math.prod(int(n) for n in entry["shape"]) * torch.empty((), dtype=dtype).element_size()
+            data = meta_path.parent / f"{key}.memmap"
+            have = data.stat().st_size if data.is_file() else None
+            if have is None and need:
+                raise TruncatedFile(f"{what}: {data} is missing ({need} bytes expected by {meta_path}): {hint}")
+            if have is not None and have != need:
+                raise TruncatedFile(f"{what}: {data} holds {have} bytes where {meta_path} expects {need} "
+                                    f"({list(entry['shape'])} × {entry['dtype']}; a truncated copy?): {hint}")
+
+
 def load_memmap(path: str | Path, *, what: str, hint: str):
-    """``TensorDict.load_memmap(path)`` of tensors and JSON only: a pickled leaf (``other.pickle``) is refused
-    with ``PickledFileRefused`` naming the file, before anything is read."""
+    """``TensorDict.load_memmap(path)`` of tensors and JSON only, each file the size its ``meta.json`` says: a pickled
+    leaf (``other.pickle``) is refused with ``PickledFileRefused`` naming the file, a short file with
+    ``TruncatedFile``, before anything is read."""
     from tensordict import TensorDict
 
     refuse_pickles(path, what=what, hint=hint)
+    check_memmap_sizes(path, what=what, hint=hint)
     return TensorDict.load_memmap(path, allow_pickle=False)
 
 

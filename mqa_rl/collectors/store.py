@@ -55,22 +55,26 @@ class EpisodeStore:
         self.meta = json.loads(json.dumps(meta))
         if "slots" not in self.meta:
             raise ValueError("store meta needs 'slots' (the number of records planned)")
-        if overwrite and self.root.exists():
-            shutil.rmtree(self.root)
+        if self.root.exists() and not self.root.is_dir():
+            raise StoreError(f"{self.root} is a file, not a store folder: choose another out_dir")
         self.root.mkdir(parents=True, exist_ok=True)
-        self._lock = open(self.root / ".lock", "w")
+        self._lock = open(self.root / ".lock", "a")         # never truncated or replaced: one inode for every writer
         try:
             fcntl.flock(self._lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             self._lock.close()
             raise StoreError(f"{self.root} is being written by another process; wait for it or choose another out_dir") from None
+        if overwrite:                   # only once the lock is ours: another writer's chunks are never removed
+            for entry in self.root.iterdir():
+                if entry.name != ".lock":
+                    shutil.rmtree(entry) if entry.is_dir() and not entry.is_symlink() else entry.unlink()
         for leftover in self.root.glob(f".{CHUNK_PREFIX}*"):       # a killed writer's partial chunk
             shutil.rmtree(leftover, ignore_errors=True)
         path = self.root / META
         if path.exists() and not chunk_paths(self.root):
             path.unlink()               # a collection that stored nothing (its policy failed to load): nothing to keep
         if path.exists():
-            found = json.loads(path.read_text())
+            found = read_meta(self.root)
             if _comparable(found) != _comparable(self.meta):
                 diff = sorted(k for k in set(found) | set(self.meta) if _comparable(found).get(k) != _comparable(self.meta).get(k))
                 raise StoreError(f"{self.root} holds another collection (differs in {diff}); choose another out_dir, "
@@ -129,7 +133,11 @@ def read_meta(root: str | Path) -> dict:
     path = Path(root) / META
     if not path.exists():
         raise FileNotFoundError(f"no collection at {root} (no {META}): collect it first (recipes/collect_rollouts.py)")
-    return json.loads(path.read_text())
+    try:
+        return json.loads(path.read_text())
+    except (UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise StoreError(f"{path} is not readable JSON ({error}): the store is damaged; collect it again "
+                         f"(the collecting recipe with overwrite=true)") from None
 
 
 def load_records(root: str | Path, select=None, *, require_complete: bool = True, rows: torch.Tensor | None = None) -> TensorDict:

@@ -44,3 +44,44 @@ def test_frames_of_two_stores_by_rows(tmp_path):
     assert torch.equal(part.get(keys.SCENE), whole.get(keys.SCENE)[rows])
     with pytest.raises(ValueError, match="rows has 23 entries, the stores hold 24"):
         load_frames([a, b], rows=rows[:23])
+
+
+def test_a_truncated_chunk_is_refused_naming_the_file_and_sizes_never_read_as_zeros(tmp_path):
+    from mqa_rl.files import TruncatedFile
+
+    root = _store(tmp_path / "a", [[0, 1, 2, 3], [4, 5, 6, 7, 8, 9, 10, 11]])
+    rgb = root / "chunk-00000" / f"{keys.RGB}.memmap"
+    rgb.write_bytes(rgb.read_bytes()[:100])                    # an interrupted copy
+    with pytest.raises(TruncatedFile, match=r"rgb.memmap holds 100 bytes where .* expects 768"):
+        load_records(root)
+    with pytest.raises(TruncatedFile):                         # a second collection does not call the store complete
+        with EpisodeStore(root, {"slots": 12, "plan": {"size": 8}}) as store:
+            store.done_slots()
+
+
+def test_a_broken_meta_json_or_an_empty_chunk_is_named(tmp_path):
+    from mqa_rl.collectors.store import StoreError, read_meta
+
+    root = _store(tmp_path / "a", [[0, 1, 2, 3]])
+    (root / "chunk-00000" / "meta.json").write_text("{not json")
+    with pytest.raises(ValueError, match=r"chunk-00000/meta.json is not readable JSON"):
+        load_records(root, require_complete=False)
+    (root / "chunk-00000" / "meta.json").unlink()
+    with pytest.raises(ValueError, match=r"chunk-00000 has no meta.json"):
+        load_records(root, require_complete=False)
+    (root / "meta.json").write_text("{")
+    with pytest.raises(StoreError, match=r"meta.json is not readable JSON"):
+        read_meta(root)
+
+
+def test_overwrite_never_removes_the_chunks_of_a_store_another_writer_holds(tmp_path):
+    from mqa_rl.collectors.store import StoreError
+
+    root = tmp_path / "a"
+    with EpisodeStore(root, {"slots": 12, "plan": {"size": 8}}) as first:
+        first.append(TensorDict({keys.SLOT: torch.arange(4)}, batch_size=[4]))
+        with pytest.raises(StoreError, match="being written by another process"):
+            EpisodeStore(root, {"slots": 12, "plan": {"size": 9}}, overwrite=True)
+        assert first.done_slots() == {0, 1, 2, 3}             # untouched
+    with EpisodeStore(root, {"slots": 12, "plan": {"size": 9}}, overwrite=True) as second:   # free now: replaced
+        assert second.done_slots() == set()
