@@ -84,9 +84,23 @@ def pack(stores: list[Path], out: Path, drop: list[str], shard_mib: float, prese
     print(f"\n{len(jobs)} chunks of {len(stores)} store(s) in {index + 1} shard(s), {total / 2**20:.1f} MiB")
 
 
+def inside(into: Path, rel: str, where: str, depth: int = 2) -> Path:
+    """``into / rel`` when ``rel`` is a relative path that stays under ``into``, at least ``depth`` names deep (a
+    store's file: 2, a chunk's file: 3, whose chunk folder is replaced); else exit naming it, as tarfile's
+    extraction filters do: a shard set from someone else must not write or delete outside ``--into``."""
+    path = Path(rel)
+    if (not rel or path.is_absolute() or ".." in path.parts or len(path.parts) < depth or "\\" in rel
+            or not (into / path).resolve().is_relative_to(into.resolve())):
+        sys.exit(f"{where}: the entry {rel!r} would be written outside --into {into} (an absolute path, '..' or a "
+                 f"top-level name): refused; nothing was unpacked from it. Pack the store again, or ask who sent it")
+    return into / path
+
+
 def unpack(shards: list[Path], into: Path, manifest_path: Path | None) -> None:
     manifest_path = manifest_path or shards[0].parent / "manifest.json"
     manifest = json.loads(manifest_path.read_text())
+    for rel in manifest:                                       # every name checked before anything is written
+        inside(into, rel, str(manifest_path))
     for rel, entry in manifest.items():                        # the stores' own meta.json travel inline
         if "inline" in entry:
             (into / rel).parent.mkdir(parents=True, exist_ok=True)
@@ -94,7 +108,12 @@ def unpack(shards: list[Path], into: Path, manifest_path: Path | None) -> None:
     for shard in shards:
         chunks: dict[Path, dict[str, bytes]] = {}
         with tarfile.open(shard) as tar:
-            for member in tar:
+            members = tar.getmembers()
+            for member in members:
+                if not member.isfile():
+                    sys.exit(f"{shard}: {member.name!r} is not a regular file (a link or device): refused")
+                inside(into, member.name.removesuffix(".xz"), str(shard), depth=3)
+            for member in members:
                 rel = member.name.removesuffix(".xz")
                 raw = lzma.decompress(tar.extractfile(member).read())
                 if hashlib.sha256(raw).hexdigest() != manifest.get(rel, {}).get("sha256"):

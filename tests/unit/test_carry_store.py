@@ -67,3 +67,39 @@ def test_the_perception_trainer_imports_without_the_simulator_ray_or_wandb():
             "spec.loader.exec_module(importlib.util.module_from_spec(spec))\n")
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO)
     assert run.returncode == 0, run.stderr[-2000:]
+
+
+def _crafted(tmp_path, names, manifest_extra=None):
+    """A shard set from someone else: members named ``names`` (their SHA-256 right), and a manifest."""
+    import hashlib
+    import io
+    import lzma
+
+    out = tmp_path / "crafted"
+    out.mkdir(parents=True)
+    manifest = dict(manifest_extra or {})
+    with tarfile.open(out / "shard-000.tar", "w") as tar:
+        for name in names:
+            raw = b"print('planted')\n"
+            manifest[name] = {"sha256": hashlib.sha256(raw).hexdigest()}
+            data = lzma.compress(raw)
+            info = tarfile.TarInfo(f"{name}.xz")
+            info.size = len(data)
+            tar.addfile(info, io.BytesIO(data))
+    (out / "manifest.json").write_text(json.dumps(manifest))
+    return out / "shard-000.tar"
+
+
+def test_unpack_refuses_names_outside_into_and_writes_or_deletes_nothing(tmp_path):
+    victim = tmp_path / "victim"
+    victim.mkdir()
+    (victim / "keep.py").write_text("original\n")
+    into = tmp_path / "there"
+    for names, extra in ((["../victim/keep.py"], None), ([f"{victim}/x/keep.py"], None),
+                         (["frames/chunk-00000/rgb.memmap"], {"../victim/meta.json": {"inline": "{}"}}),
+                         (["frames/x"], None)):                     # two names deep: it would replace the store's folder
+        shard = _crafted(tmp_path / str(abs(hash(str(names) + str(extra)))), names, extra)
+        run = subprocess.run([*TOOL, "unpack", str(shard), "--into", str(into)], capture_output=True, text=True)
+        assert run.returncode != 0 and "refused" in run.stderr, (names, run.stderr)
+        assert (victim / "keep.py").read_text() == "original\n" and sorted(p.name for p in victim.iterdir()) == ["keep.py"]
+        assert not into.exists() or not any(into.rglob("*"))
