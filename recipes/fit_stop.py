@@ -119,7 +119,8 @@ def main(cfg: DictConfig) -> None:
     max_pushes = int(run_cfg.env.max_pushes)
     push_memory = memory_radius(cfg.push_memory, run_cfg.env)
     torch.set_num_threads(int(cfg.threads))
-    reading = PerceivedCount.from_file(cfg.perception, token_channels(MQADataset(dataset))) if cfg.perception else None
+    reading = PerceivedCount.from_file(cfg.perception, token_channels(MQADataset(dataset)),
+                                          num_classes=len(MQADataset(dataset).classes)) if cfg.perception else None
     frames = reading_env_kwargs(reading, int(run_cfg.env.get("image_size", 224)))
     levels, started = {}, time.time()
     for level in cfg.difficulties:

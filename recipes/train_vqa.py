@@ -77,9 +77,7 @@ def build_model(cfg: DictConfig, ds: MQADataset) -> tuple[VQAModel, dict]:
     options = {k: cfg.vqa[k] for k in MODEL_OPTIONS}
     if cfg.vqa.pool == "counts":                      # the counting perception in place of EQA's CNN
         perception, perception_meta = load_perception(cfg.perception.weights)
-        if perception.num_classes != 1 + len(ds.classes):
-            raise ValueError(f"perception {cfg.perception.weights} knows {perception.num_classes - 1} classes, the dataset "
-                             f"{len(ds.classes)}: train one on frames of this object library")
+        check_library(perception, len(ds.classes), cfg.perception.weights)
         if perception.depth:
             raise ValueError(f"perception {cfg.perception.weights} reads depth (model.depth=true), which the VQA does not "
                              f"pass it yet (its answer contract is rgb: docs/perception.md, 'Depth as an input'): "

@@ -41,7 +41,7 @@ class FrameKeeper:
         if not Path(path).is_file():
             raise FileNotFoundError(f"kept_frame={path}: no such perception file; give a counting perception "
                                     f"(e.g. checkpoints/vqa_counting/perception.pt, or one of recipes/train_perception.py)")
-        return cls(PerceivedCount.from_file(path, token_channels(dataset)), policy)
+        return cls(PerceivedCount.from_file(path, token_channels(dataset), num_classes=len(dataset.classes)), policy)
 
     def env_kwargs(self, image_size: int) -> dict:
         """The env options the keeper needs: its perception's frames in every observation."""

@@ -23,7 +23,7 @@ from tensordict import TensorDictBase
 from torch import nn
 
 from mqa_rl import keys
-from mqa_rl.modules.perception import CountingPerception, load_perception
+from mqa_rl.modules.perception import CountingPerception, check_library, load_perception
 from mqa_rl.modules.vote_counting import MAX_COUNT, TOP
 
 READING = ("perceived_count", *(f"perceived_mass_{i}" for i in range(1, TOP + 1)), "perceived_log_area",
@@ -67,9 +67,13 @@ class PerceivedCount(nn.Module):
         self.path, self.sha256 = path, sha256
 
     @classmethod
-    def from_file(cls, path: str | Path, token_channel: torch.Tensor, sha256: str | None = None) -> "PerceivedCount":
-        """The perception at ``path``; ValueError when ``sha256`` is given and the file is another one."""
+    def from_file(cls, path: str | Path, token_channel: torch.Tensor, sha256: str | None = None,
+                  num_classes: int | None = None) -> "PerceivedCount":
+        """The perception at ``path``; ValueError when ``sha256`` is given and the file is another one, or when
+        ``num_classes`` (the dataset's) is given and the perception knows another object library."""
         model, _ = load_perception(path)
+        if num_classes is not None:
+            check_library(model, num_classes, path)
         found = file_sha256(path)
         if sha256 is not None and found != sha256:
             raise ValueError(f"{path} is not the perception this stop was fitted with (its SHA-256 differs): restore "

@@ -16,7 +16,7 @@ render). Its last layer starts at zero, so a file without it warm-starts one wit
 
 Counting needs instances, not class areas: a perfect class mask split into connected components
 counts 0.80 / 0.61 / 0.48 of the test questions right where a perfect instance counter gets 0.96 /
-0.81 / 0.57 (docs/answering.md): occlusion cuts one object into pieces and touching objects of a
+0.81 / 0.57 (docs/perception.md, "Why instances"): occlusion cuts one object into pieces and touching objects of a
 class merge. So every cell also *votes* for the centre of the visible part of its object (as
 Panoptic-DeepLab's offset head does): the pieces of one object vote for one place, two touching
 objects for two. ``mqa_rl.modules.vote_counting`` turns class probabilities and votes into clusters
@@ -238,6 +238,14 @@ def save_perception(model: CountingPerception, path: str | Path, meta: dict) -> 
     return save_versioned(path, PERCEPTION_FORMAT, PERCEPTION_VERSION,
                           {"config": model.config(), "state_dict": {k: v.detach().cpu() for k, v in model.state_dict().items()},
                            "meta": dict(meta)})
+
+
+def check_library(perception: CountingPerception, dataset_classes: int, path) -> None:
+    """ValueError when a perception was trained on another object library (its class channels are not background
+    plus the dataset's classes): read anyway it would index past its channels after minutes of episodes."""
+    if perception.num_classes != 1 + int(dataset_classes):
+        raise ValueError(f"perception {path} knows {perception.num_classes - 1} classes, the dataset {dataset_classes}: "
+                         f"train one on frames of this object library (recipes/train_perception.py)")
 
 
 def load_perception(path: str | Path) -> tuple[CountingPerception, dict]:

@@ -141,6 +141,14 @@ def test_perception_file_round_trip_and_refusals(tmp_path):
         load_perception(tmp_path / "foreign.pt")
 
 
+def test_a_perception_of_another_object_library_is_refused_at_load_by_its_readers(small_dataset, tmp_path):
+    from mqa_rl.modules.kept_frame import FrameKeeper
+
+    other = save_perception(CountingPerception(1 + 4, widths=(8, 8, 16, 16)), tmp_path / "four.pt", {})
+    with pytest.raises(ValueError, match=r"knows 4 classes, the dataset 20: train one"):
+        FrameKeeper.from_file(other, small_dataset)           # evaluate_policy kept_frame=, fit_stop perception=
+
+
 def test_counting_vqa_answers_through_the_public_contract_and_reloads(tmp_path):
     perception = CountingPerception(K, widths=(8, 8, 16, 16))
     vocab = ["<pad>", "<unk>", "how", "many", "cans", "are", "there", "in", "the", "bin", "?"]
