@@ -290,8 +290,12 @@ def _train(cfg: DictConfig, out: Path) -> dict:
             group["lr"] = base * factor(state["step"])
         print(f"resumed at step {state['step']} ({trim_scalars(out / 'csv', state['step'])} log rows after it dropped)")
     if state["step"] >= steps and (out / PERCEPTION_FILE).exists():
-        print(f"{out} has finished its {state['step']} steps already (raise train.steps to train on)")
-        return json.loads((out / "summary.json").read_text()) if (out / "summary.json").exists() else dict(state)
+        if "counting_calibration" in load_perception(out / PERCEPTION_FILE)[1] and (out / "summary.json").exists():
+            print(f"{out} has finished its {state['step']} steps already (raise train.steps to train on)")
+            return json.loads((out / "summary.json").read_text())
+        print(f"{out} has finished its {state['step']} steps but not its counting calibration and summary "
+              f"(killed while calibrating): finishing them", flush=True)
+        return finish(out, state, steps, val, device, n_train, baseline)
     write_atomic(out / "config.yaml", OmegaConf.to_yaml(OmegaConf.create(config)))
     logger = RunLogger(out, wandb=cfg.logger.wandb, project=cfg.logger.project, exp_name="perception", config=config)
     meta = {"command": COMMAND, "frames": [{"store": str(s), "dataset_sha256": m["dataset"]["manifest_sha256"],
@@ -346,6 +350,12 @@ def _train(cfg: DictConfig, out: Path) -> dict:
     finally:
         bar.close()
         logger.close()
+    return finish(out, state, steps, val, device, n_train, baseline)
+
+
+def finish(out: Path, state: dict, steps: int, val, device, n_train: int, baseline: dict | None) -> dict:
+    """The counting calibration of the best file on the held-out frames, then ``summary.json``: what a resumed run
+    that was killed after its last step still owes (the readers need a calibrated file)."""
     calibrated = calibrate_file(out / PERCEPTION_FILE, val, device)
     summary = {"steps": steps, "best_step": state["best_step"], "best_val_count_accuracy": state["best"],
                "calibrated_val_count_accuracy": calibrated["val/count_accuracy"],

@@ -39,7 +39,7 @@ from mqa_rl.data.dataset import LEVELS
 from mqa_rl.files import write_atomic
 from mqa_rl.losses.vqa import VQALoss
 from mqa_rl.modules.vqa import CHECKPOINT_NAME, VQAModel, grounding_module, load_vqa, save_vqa, vqa_module
-from mqa_rl.modules.perception import load_perception
+from mqa_rl.modules.perception import check_library, load_perception
 from mqa_rl.modules.vqa_encoder import load_encoder
 from mqa_rl.training.model_checkpoint import ModelCheckpoint
 from mqa_rl.training.resume_guard import RESUMABLE, refuse_changed_config

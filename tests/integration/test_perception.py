@@ -298,6 +298,11 @@ def test_frames_perception_and_counting_vqa_recipes_end_to_end(small_dataset, sp
             train.train(compose_recipe_config("train_perception", [*targs, "train.steps=4", "resume=true"]))
     again = train.train(compose_recipe_config("train_perception", [*targs, "train.steps=4", "resume=true"]))
     assert again["steps"] == 4 and 0.0 <= again["calibrated_val_count_accuracy"] <= 1.0
+    model, meta = load_perception(out / "perception.pt")               # killed while calibrating: the best file
+    save_perception(model, out / "perception.pt", {k: v for k, v in meta.items() if k != "counting_calibration"})
+    (out / "summary.json").unlink()                                   # without its calibration, no summary
+    finished = train.train(compose_recipe_config("train_perception", [*targs, "train.steps=4", "resume=true"]))
+    assert finished == again and "counting_calibration" in load_perception(out / "perception.pt")[1]
     with pytest.raises(ValueError, match="unet only"):
         train.train(compose_recipe_config("train_perception", [*targs, "train.steps=2", "model.depth=true",
                                                                "model.backbone=efficientnet_lite0"]))

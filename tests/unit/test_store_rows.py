@@ -9,8 +9,9 @@ from mqa_rl.collectors.frame_records import load_frames
 from mqa_rl.collectors.store import EpisodeStore, load_records
 
 
-def _store(root, slots, scene_base=0):
-    with EpisodeStore(root, {"slots": 12, "plan": {"size": 8}}) as store:
+def _store(root, slots, scene_base=0, dataset=None):
+    meta = {"slots": 12, "plan": {"size": 8}, **({"dataset": {"manifest_sha256": dataset}} if dataset else {})}
+    with EpisodeStore(root, meta) as store:
         for chunk in slots:                                    # chunks written out of slot order
             s = torch.tensor(chunk)
             store.append(TensorDict({keys.SLOT: s, keys.SCENE: s // 3 + scene_base,
@@ -44,6 +45,22 @@ def test_frames_of_two_stores_by_rows(tmp_path):
     assert torch.equal(part.get(keys.SCENE), whole.get(keys.SCENE)[rows])
     with pytest.raises(ValueError, match="rows has 23 entries, the stores hold 24"):
         load_frames([a, b], rows=rows[:23])
+
+
+def test_two_stores_of_the_same_piles_share_scene_ids_so_a_split_by_scene_holds_a_pile_out_of_both(tmp_path):
+    from mqa_rl.training.vqa_data import scene_split
+
+    a = _store(tmp_path / "a", [list(range(12))], dataset="piles")
+    b = _store(tmp_path / "b", [list(range(12))], dataset="piles")            # the same piles, other pushes
+    c = _store(tmp_path / "c", [list(range(12))], dataset="other piles")
+    frames = load_frames([a, b, c], [keys.SCENE])
+    scenes = frames.get(keys.SCENE)
+    assert torch.equal(scenes[:12], scenes[12:24]) and scenes[24:].min() >= 1_000_000
+    frames.set(keys.LEVEL, torch.zeros(36, dtype=torch.int64))
+    held = scene_split(frames, 0.5, seed=0)
+    assert torch.equal(held[:12], held[12:24]) and held[:24].any()           # held out of both stores alike
+    trained = set(scenes[~held].tolist())
+    assert not trained & set(scenes[held].tolist())
 
 
 def test_a_truncated_chunk_is_refused_naming_the_file_and_sizes_never_read_as_zeros(tmp_path):
