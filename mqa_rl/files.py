@@ -49,6 +49,17 @@ def load_tensors(path: str | Path, *, what: str, hint: str):
         raise ValueError(f"{path} is not a readable {what} ({load_failure(error)}): {hint}") from error
 
 
+def refuse_nonfinite(state_dict, path, hint: str) -> None:
+    """ValueError naming the weights of a model file that hold NaN or infinity: loaded, they answer or count nonsense
+    silently (a crafted or damaged file)."""
+    import torch
+
+    bad = [k for k, v in (state_dict or {}).items() if torch.is_tensor(v) and v.is_floating_point()
+           and not torch.isfinite(v).all()]
+    if bad:
+        raise ValueError(f"{path}: the weights {bad[:3]} hold NaN or infinity; {hint}")
+
+
 PICKLED = ("*.pickle", "*.pkl")      # what TensorDict and TorchRL write for objects that are not tensors
 
 

@@ -34,13 +34,15 @@ what it was trained on; ``recipes/train_perception.py`` writes it.
 
 from __future__ import annotations
 
+import math
+
 from pathlib import Path
 
 import torch
 import torch.nn.functional as F
 from torch import nn
 
-from mqa_rl.files import load_versioned, save_versioned
+from mqa_rl.files import load_versioned, refuse_nonfinite, save_versioned
 from mqa_rl.modules import vote_counting
 from mqa_rl.modules.imagenet_backbone import EfficientLiteEncoder
 from mqa_rl.modules.vqa_encoder import standardise
@@ -252,6 +254,7 @@ def load_perception(path: str | Path) -> tuple[CountingPerception, dict]:
     """(perception in eval mode, meta) from ``save_perception``'s file; FileNotFoundError / ValueError say what to do."""
     hint = "train one with `python recipes/train_perception.py` (it writes <out_dir>/perception.pt)"
     blob = load_versioned(path, PERCEPTION_FORMAT, PERCEPTION_VERSION, what="perception file", hint=hint)
+    check_sane(blob.get("config"), blob.get("state_dict"), path, hint)
     try:
         model = CountingPerception(**blob["config"])
         model.load_state_dict(blob["state_dict"])
@@ -259,3 +262,24 @@ def load_perception(path: str | Path) -> tuple[CountingPerception, dict]:
         raise ValueError(f"{path}: the weights do not fit the perception ({type(error).__name__}: {str(error)[:300]}); "
                          f"{hint}") from error
     return model.eval(), dict(blob.get("meta", {}))
+
+
+# what a perception file's architecture may ask for before anything is allocated (a crafted width would take GBs)
+LIMITS = {"num_classes": 1024, "image_size": 2048, "detail": 512, "width": 4096}
+
+
+def check_sane(config, state_dict, path, hint: str) -> None:
+    """ValueError for a perception file whose architecture is out of bounds, whose counting settings are not finite
+    numbers, or whose weights hold NaN or infinity: such a file would load and count 0 silently, or allocate GBs."""
+    if not isinstance(config, dict) or not isinstance(state_dict, dict):
+        raise ValueError(f"{path}: no architecture or weights in the perception file; {hint}")
+    sizes = {k: config.get(k, 0) for k in ("num_classes", "image_size", "detail")}
+    sizes.update({f"widths[{i}]": w for i, w in enumerate(config.get("widths") or ())})
+    for name, value in sizes.items():
+        limit = LIMITS.get(name, LIMITS["width"])
+        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= limit:
+            raise ValueError(f"{path}: {name}={value!r} is not a size a perception has (0-{limit}); {hint}")
+    for name, value in (config.get("counting") or {}).items():
+        if isinstance(value, (int, float)) and not isinstance(value, bool) and not math.isfinite(value):
+            raise ValueError(f"{path}: the counting setting {name}={value} is not a finite number; {hint}")
+    refuse_nonfinite(state_dict, path, hint)

@@ -61,7 +61,7 @@ from torch import nn
 
 from mqa_rl import keys
 from mqa_rl.data.vocab import PAD, UNK, words
-from mqa_rl.files import load_failure, write_atomic
+from mqa_rl.files import load_failure, refuse_nonfinite, write_atomic
 from mqa_rl.modules.push_qnet import QuestionEncoder
 from mqa_rl.modules import vote_counting
 from mqa_rl.modules.perception import CountingPerception
@@ -436,6 +436,7 @@ def load_vqa(path: str | Path, map_location: str | torch.device = "cpu") -> VQAM
     if int(blob.get("version", 0)) > VQA_VERSION:
         raise ValueError(f"{path} has VQA format version {blob['version']}, newer than this mqa_rl's {VQA_VERSION}: "
                          f"update mqa_rl")
+    refuse_nonfinite(blob.get("state_dict"), path, TRAIN_HINT)
     try:
         model = VQAModel(blob["vocab"], blob["answers"], **blob["config"])
         model.load_state_dict(blob["state_dict"])

@@ -139,6 +139,18 @@ def test_perception_file_round_trip_and_refusals(tmp_path):
     torch.save({"format": "something else"}, tmp_path / "foreign.pt")
     with pytest.raises(ValueError, match="not a perception file"):
         load_perception(tmp_path / "foreign.pt")
+    blob = torch.load(path, weights_only=True)                         # crafted files: refused before allocating
+    nan = {**blob, "state_dict": {k: v.clone() for k, v in blob["state_dict"].items()}}
+    next(v for v in nan["state_dict"].values() if v.is_floating_point()).fill_(float("nan"))
+    torch.save(nan, tmp_path / "nan.pt")
+    with pytest.raises(ValueError, match="NaN or infinity"):
+        load_perception(tmp_path / "nan.pt")
+    torch.save({**blob, "config": {**blob["config"], "counting": {"radius": float("nan")}}}, tmp_path / "nan_counting.pt")
+    with pytest.raises(ValueError, match="radius=nan is not a finite number"):
+        load_perception(tmp_path / "nan_counting.pt")
+    torch.save({**blob, "config": {**blob["config"], "widths": [8, 8, 16, 10**7]}}, tmp_path / "huge.pt")
+    with pytest.raises(ValueError, match=r"widths\[3\]=10000000 is not a size"):
+        load_perception(tmp_path / "huge.pt")
 
 
 def test_a_perception_of_another_object_library_is_refused_at_load_by_its_readers(small_dataset, tmp_path):
@@ -167,6 +179,11 @@ def test_counting_vqa_answers_through_the_public_contract_and_reloads(tmp_path):
     assert model.grounding_logits(tokens).shape == (1, 2, K)
     again = load_vqa(save_vqa(model, tmp_path / "vqa.pt"))
     assert torch.allclose(again.answer_probs(tokens, img, img), probs)
+    blob = torch.load(tmp_path / "vqa.pt", weights_only=True)
+    next(v for v in blob["state_dict"].values() if v.is_floating_point()).fill_(float("inf"))
+    torch.save(blob, tmp_path / "inf.pt")
+    with pytest.raises(ValueError, match="NaN or infinity"):          # a crafted file would answer nonsense silently
+        load_vqa(tmp_path / "inf.pt")
     with pytest.raises(ValueError, match="counting perception"):
         VQAModel(vocab, ["0"], pool="counts")
     # the frames it reads in full: its perception's input (a 448-px perception wants the answer camera's frames)
