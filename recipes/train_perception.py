@@ -226,6 +226,9 @@ def _train(cfg: DictConfig, out: Path) -> dict:
     device = torch.device(cfg.device)
     config = OmegaConf.to_container(cfg, resolve=True)
 
+    if not cfg.frames.stores:
+        raise ValueError("frames.stores=[] names no frame store: give the folders recipes/collect_frames.py wrote, "
+                         "e.g. 'frames.stores=[runs/perception/frames]'")
     metas = [read_meta(s) for s in cfg.frames.stores]
     if cfg.model.depth and any(m.get("schema", 1) < DEPTH_SCHEMA for m in metas):
         raise ValueError(f"model.depth=true needs frames with depth images; {list(cfg.frames.stores)} were collected "

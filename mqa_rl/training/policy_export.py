@@ -35,11 +35,14 @@ def is_export(folder: Path) -> bool:
 def check_export_target(run: Path, out_dir: Path, overwrite: bool) -> None:
     """``overwrite`` may replace an earlier export only: never the run itself, a folder holding the run, or
     a folder with anything an export does not write (a user's files, another run's checkpoints)."""
+    source, target = run.resolve(), out_dir.resolve()
+    if target != source and source in target.parents:
+        raise ValueError(f"out_dir={out_dir} lies inside the run being exported ({run}): a folder there (e.g. under "
+                         f"checkpoints/) would break its resume; choose a folder outside it, e.g. checkpoints/<name>")
     if not out_dir.exists():
         return
     if not overwrite:
         raise FileExistsError(f"{out_dir} exists: choose another out_dir, or overwrite=true to replace an earlier export")
-    source, target = run.resolve(), out_dir.resolve()
     if source == target or target in source.parents:
         raise ValueError(f"out_dir={out_dir} holds the run being exported ({run}): choose another out_dir")
     if not out_dir.is_dir() or not is_export(out_dir):

@@ -330,6 +330,9 @@ def test_export_overwrite_replaces_only_an_earlier_export(tmp_path):
         check_export_target(run, tmp_path / "X", overwrite=True)
     with pytest.raises(ValueError, match="holds the run"):             # the run itself
         check_export_target(run, run, overwrite=True)
+    for inner in (run / "checkpoints" / "checkpoint-000000000032", run / "export"):   # a folder inside the run
+        with pytest.raises(ValueError, match="lies inside the run"):
+            check_export_target(run, inner, overwrite=False)
     other = tmp_path / "other"
     (other / "checkpoints").mkdir(parents=True)
     with pytest.raises(FileExistsError, match="not an earlier export"):
