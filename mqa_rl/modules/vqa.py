@@ -64,7 +64,7 @@ from mqa_rl.data.vocab import PAD, UNK, words
 from mqa_rl.files import load_failure, refuse_nonfinite, write_atomic
 from mqa_rl.modules.push_qnet import QuestionEncoder
 from mqa_rl.modules import vote_counting
-from mqa_rl.modules.perception import CountingPerception
+from mqa_rl.modules.perception import CountingPerception, check_library
 from mqa_rl.modules.vqa_encoder import FrameEncoder, standardise
 
 VQA_FORMAT = "mqa_rl.vqa"
@@ -348,6 +348,8 @@ class VQAModel(nn.Module):
             raise ValueError(f"this VQA was trained with another question or answer vocabulary than {dataset.root}'s "
                              f"({len(self.vocab)} vs {len(dataset.vocab)} words, answers {self.answers} vs "
                              f"{list(dataset.answers)}): retrain it on this dataset's rollouts")
+        if self.pool == "counts":                       # its perception counts this dataset's object classes
+            check_library(self.encoder, len(dataset.classes), "of this VQA")
 
 
 def image_digest(image: torch.Tensor) -> bytes:

@@ -47,7 +47,8 @@ class VQAEnsemble:
         return self.members[0].tokenize(texts)
 
     def check_dataset(self, dataset) -> None:
-        self.members[0].check_dataset(dataset)
+        for member in self.members:
+            member.check_dataset(dataset)
 
     def answer_probs(self, question_tokens: torch.Tensor, first_rgb: torch.Tensor, last_rgb: torch.Tensor) -> torch.Tensor:
         """P(answer) [B, len(answers)]: the members' probabilities averaged."""

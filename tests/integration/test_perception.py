@@ -170,6 +170,10 @@ def test_counting_vqa_answers_through_the_public_contract_and_reloads(tmp_path):
     img = torch.randint(0, 255, (1, 224, 224, 3), dtype=torch.uint8)
     probs = model.answer_probs(tokens, img, img)
     assert probs.shape == (1, 4) and torch.allclose(probs.sum(-1), torch.ones(1))
+    same_words = dict(vocab=SimpleNamespace(itos=vocab), answers=["0", "1", "2", "3"], root="ds")
+    model.check_dataset(SimpleNamespace(classes=[f"c{i}" for i in range(K - 1)], **same_words))
+    with pytest.raises(ValueError, match=f"knows {K - 1} classes, the dataset 20"):   # another object library
+        model.check_dataset(SimpleNamespace(classes=[f"c{i}" for i in range(20)], **same_words))
     # repeated images (I_stop = I_start, a scene's I_start in several episodes) are encoded once, answered as alone
     other = torch.randint(0, 255, (1, 224, 224, 3), dtype=torch.uint8)
     first, last = torch.cat([img, img, other]), torch.cat([other, img, img])
