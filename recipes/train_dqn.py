@@ -51,7 +51,7 @@ from mqa_rl.training.run_dir import RunLock, positive_ints, refuse_unresumable
 from mqa_rl.training.run_logger import RunLogger, trim_scalars
 from mqa_rl.training.signals import exit_on_sigterm
 from mqa_rl.verified_checkpoint import newest_checkpoint, restore_verified
-from mqa_rl.transforms.dihedral import DihedralAugment
+from mqa_rl.envs.dihedral import DihedralAugment
 from mqa_rl.transforms.mqa_env import make_mqa_env
 
 
