@@ -50,7 +50,7 @@ from mqa_rl.modules.push_policy import make_push_qnet
 from mqa_rl.training.run_logger import RunLogger
 from mqa_rl.training.signals import exit_on_sigterm
 from mqa_rl.training.vqa_data import scene_split
-from mqa_rl.transforms.dihedral import random_dihedral_in
+from mqa_rl.envs.dihedral import random_dihedral_in
 
 RECOGNITION_FILE = "recognition.pt"
 

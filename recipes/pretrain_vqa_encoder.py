@@ -41,7 +41,7 @@ from mqa_rl.training.model_checkpoint import ModelCheckpoint
 from mqa_rl.training.run_logger import RunLogger, trim_scalars
 from mqa_rl.training.signals import exit_on_sigterm
 from mqa_rl.training.vqa_data import pretraining_frames, scene_split
-from mqa_rl.transforms.dihedral import random_dihedral_in
+from mqa_rl.envs.dihedral import random_dihedral_in
 
 ENCODER_FILE = "encoder.pt"
 

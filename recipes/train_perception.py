@@ -49,7 +49,7 @@ from mqa_rl.training.run_dir import RunLock, positive_ints, refuse_unresumable
 from mqa_rl.training.run_logger import RunLogger, trim_scalars
 from mqa_rl.training.signals import exit_on_sigterm
 from mqa_rl.training.vqa_data import scene_split
-from mqa_rl.transforms.dihedral import random_dihedral
+from mqa_rl.envs.dihedral import random_dihedral
 
 PERCEPTION_FILE = "perception.pt"
 # what training reads of a frame (a depth perception also its DEPTH: an rgb run leaves it on disk)

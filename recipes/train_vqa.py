@@ -48,7 +48,7 @@ from mqa_rl.training.run_logger import RunLogger, trim_scalars
 from mqa_rl.training.signals import exit_on_sigterm
 from mqa_rl.training.vqa_data import (Batches, encode_store, load_answering_records, question_class_labels, scene_split,
                                      encoder_fingerprint)
-from mqa_rl.transforms.dihedral import DIHEDRAL
+from mqa_rl.envs.dihedral import DIHEDRAL
 
 # validation metric that picks the kept checkpoint -> its score (higher is better)
 SELECT = {"accuracy": lambda m: m["val/accuracy"], "loss": lambda m: -m["val/loss"]}

@@ -21,7 +21,7 @@ from tensordict import TensorDictBase
 from torchrl.data import LazyMemmapStorage, LazyTensorStorage, TensorDictPrioritizedReplayBuffer
 
 from mqa_rl import keys
-from mqa_rl.transforms.dihedral import DihedralAugment
+from mqa_rl.envs.dihedral import DihedralAugment
 
 OBS_KEYS = (keys.RGB, keys.DEPTH, keys.QUESTION, keys.ACTION_MASK)
 REPLAY_KEYS = (
@@ -45,7 +45,7 @@ def transition_bytes(example: TensorDictBase) -> int:
 
 def make_replay_buffer(cfg: Mapping, scratch_dir: str | Path | None) -> TensorDictPrioritizedReplayBuffer:
     """From the ``buffer`` config: size, batch_size, alpha, beta_init, storage (memmap | memory),
-    augment (none | dihedral: each sample under a random symmetry of the square bin, ``mqa_rl.transforms.dihedral``)."""
+    augment (none | dihedral: each sample under a random symmetry of the square bin, ``mqa_rl.envs.dihedral``)."""
     size, batch = int(cfg["size"]), int(cfg["batch_size"])
     if size < batch or batch < 1:
         raise ValueError(f"buffer.size={size} must be ≥ buffer.batch_size={batch} ≥ 1")

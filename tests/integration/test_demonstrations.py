@@ -10,7 +10,7 @@ from mqa_rl import keys
 from mqa_rl.envs import actions
 from mqa_rl.losses.demonstration import DemonstrationLoss
 from mqa_rl.modules.push_qnet import PushQNet
-from mqa_rl.transforms.dihedral import DihedralAugment, transform_action
+from mqa_rl.envs.dihedral import DihedralAugment, transform_action
 from torch_threads import one_torch_thread  # noqa: F401  (autouse)
 
 VOCAB, L, S = 30, 8, 224

@@ -18,7 +18,7 @@ from mqa_rl.modules.vqa import VQAModel, image_digest, load_vqa, vqa_module
 from mqa_rl.modules.vqa_encoder import FrameEncoder, PretrainHeads, load_encoder, save_encoder
 from mqa_rl.training.frame_pack import load_frame_pack
 from mqa_rl.training.vqa_data import Batches, encode_store, encoder_fingerprint, load_answering_records, pretraining_frames
-from mqa_rl.transforms.dihedral import dihedral
+from mqa_rl.envs.dihedral import dihedral
 from mqa_rl.verified_checkpoint import CheckpointCorrupt
 
 TEXTS = ["How many cans are there in the bin?", "How many apples are there in the bin?"]

@@ -12,7 +12,7 @@ from tensordict import TensorDict
 from mqa_rl import keys
 from mqa_rl.collectors.replay import make_replay_buffer
 from mqa_rl.envs import actions
-from mqa_rl.transforms.dihedral import (DIHEDRAL, DihedralAugment, dihedral, mirror_first, random_dihedral,
+from mqa_rl.envs.dihedral import (DIHEDRAL, DihedralAugment, dihedral, mirror_first, random_dihedral,
                                         transform_action, transform_images, transform_push_map)
 
 ELEMENTS = [(k, m) for m in (False, True) for k in range(4)]
