@@ -315,9 +315,9 @@ def evaluate(cfg: DictConfig) -> dict:
                 if results["systems"][n]["policy_spec"]["kind"] == "dqn"]
         runs = [r for r in runs if (r / "csv" / "scalars" / "train" / "reward.csv").exists()]
         if runs:
-            import plot_curves                        # recipes/plot_curves.py, beside this script
+            from mqa_rl.evaluation.reward_curves import plot_reward_curves
 
-            plot_curves.plot(runs, out / "fig7_rewards.png")
+            plot_reward_curves(runs, out / "fig7_rewards.png")
     write_atomic(out / "by_scene.md", report.by_scene_markdown(results))
     write_atomic(out / "results.json", json.dumps(results, indent=1, default=float))
     print(f"\n{head}\n\n{t3}\n\n{paired}\n")

@@ -78,11 +78,8 @@ def compose_recipe_config(name: str, overrides: list[str]):
 def load_recipe(name: str):
     """recipes/<name>.py as a module (recipes/ is no package), to call its functions in-process."""
     import importlib.util
-    import sys
 
     recipes = REPO / "recipes"
-    if str(recipes) not in sys.path:
-        sys.path.append(str(recipes))          # as when run as a script (evaluate.py imports plot_curves)
     spec = importlib.util.spec_from_file_location(f"recipe_{name}", recipes / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
