@@ -21,7 +21,6 @@ Writes ``out_dir/perception.pt`` (the best; ``mqa_rl.modules.perception.load_per
 from __future__ import annotations
 
 import mqa_rl  # noqa: F401  (first: sets OMP_WAIT_POLICY before torch loads)
-import itertools
 import json
 import math
 import time
@@ -37,12 +36,11 @@ from tqdm import tqdm
 from mqa_rl import keys
 from mqa_rl.collectors.frame_records import DEPTH_SCHEMA, load_frames
 from mqa_rl.collectors.store import read_meta
-from mqa_rl.files import load_versioned, write_atomic
-from mqa_rl.losses.perception import PerceptionLoss, countable_counts, slot_pixels
-from mqa_rl.modules import vote_counting
-from mqa_rl.data.dataset import LEVELS
-from mqa_rl.modules.perception import (PERCEPTION_FORMAT, PERCEPTION_VERSION, CountingPerception, check_backbone,
-                                       input_size, load_perception, save_perception)
+from mqa_rl.files import write_atomic
+from mqa_rl.losses.perception import PerceptionLoss, random_crop
+from mqa_rl.modules.perception import (CountingPerception, check_backbone, init_from_file, input_size, load_perception,
+                                       save_perception)
+from mqa_rl.training.count_calibration import calibrate_counting, count_accuracy
 from mqa_rl.training.model_checkpoint import ModelCheckpoint
 from mqa_rl.training.resume_guard import RESUMABLE, refuse_changed_config
 from mqa_rl.training.run_dir import RunLock, positive_ints, refuse_unresumable
@@ -54,12 +52,7 @@ from mqa_rl.envs.dihedral import random_dihedral
 PERCEPTION_FILE = "perception.pt"
 # what training reads of a frame (a depth perception also its DEPTH: an rgb run leaves it on disk)
 FRAME_KEYS = (keys.RGB, keys.OBJECT_MAP, keys.OBJECT_CLASSES, keys.FRAME_VISIBLE, keys.SCENE, keys.LEVEL)
-# the counting settings tried on held-out pretraining scenes (vote_counting.DEFAULT_COUNTING: what they mean)
-CALIBRATION_GRID = {"radius": (2.5, 4.0), "nms": (5, 9), "min_prob": (0.05, 0.3), "min_px": (12, 16, 20, 28, 36),
-                    "round_at": (0.3, 0.4, 0.5, 0.6, 0.7)}
 COMMAND = "python recipes/train_perception.py"
-# the convolutions that read the input image (a depth perception's read a fourth channel)
-STEMS = ("down.0.0.weight", "detail.0.0.weight")
 
 
 def check_config(cfg: DictConfig) -> None:
@@ -78,64 +71,6 @@ def check_config(cfg: DictConfig) -> None:
         read_meta(store)                     # FileNotFoundError naming the recipe that collects it
 
 
-def true_counts(frames, num_classes: int) -> torch.Tensor:
-    """int64 [N, K-1]: objects of each class with ≥ COUNTABLE_PX visible pixels (the perfect counter)."""
-    return countable_counts(frames.get(keys.FRAME_VISIBLE), frames.get(keys.OBJECT_CLASSES), num_classes).long()
-
-
-def accuracy_table(pred: torch.Tensor, frames) -> dict[str, float]:
-    """Share of (frame, class present in its scene) pairs whose count ``pred`` [N, K-1] is right, overall and by level."""
-    k = pred.shape[1] + 1
-    present = torch.nn.functional.one_hot(frames.get(keys.OBJECT_CLASSES), k)[..., 1:].amax(1).bool()
-    right = (pred == true_counts(frames, k)) & present
-    levels = frames.get(keys.LEVEL)
-    out = {"val/count_accuracy": (right.sum() / present.sum()).item()}
-    for i, name in enumerate(LEVELS):
-        if (levels == i).any():
-            out[f"val/count_accuracy_{name}"] = (right[levels == i].sum() / present[levels == i].sum()).item()
-    return out
-
-
-@torch.no_grad()
-def predictions(model: CountingPerception, frames, device, batch_size: int = 64):
-    """(class probabilities, votes, density) of every frame, on the CPU."""
-    model.eval()
-    depth = frames.get(keys.DEPTH) if model.depth else None
-    out = [model.predict(frames.get(keys.RGB)[s:s + batch_size].to(device),
-                         None if depth is None else depth[s:s + batch_size].to(device))
-           for s in range(0, frames.shape[0], batch_size)]
-    model.train()
-    return tuple(torch.cat([o[i].float().cpu() for o in out]) for i in range(3))
-
-
-def count_accuracy(model: CountingPerception, frames, device) -> dict[str, float]:
-    """``accuracy_table`` of the model's counts with its own counting settings, and (``val/density_*``)
-    of its density readout rounded to the nearest count."""
-    probs, votes, density = predictions(model, frames, device)
-    out = accuracy_table(vote_counting.counts(probs, votes, density, model.cell_px, **model.counting), frames)
-    dens = accuracy_table(vote_counting.density_counts(vote_counting.expected_counts(probs, density)), frames)
-    return {**out, **{k.replace("val/", "val/density_"): v for k, v in dens.items()}}
-
-
-def calibrate_counting(model: CountingPerception, frames, device) -> tuple[dict, dict, list[dict]]:
-    """The counting settings (``CALIBRATION_GRID``) under which the model counts the most (frame, class present)
-    pairs of ``frames`` (held-out pretraining scenes) right, their accuracy row, and every setting's."""
-    probs, votes, density = predictions(model, frames, device)
-    tried = []
-    grid = CALIBRATION_GRID
-    for radius, nms, min_prob in itertools.product(grid["radius"], grid["nms"], grid["min_prob"]):
-        masses = vote_counting.clusters(probs, votes, model.cell_px, radius=radius, nms=nms, min_prob=min_prob)
-        for min_px in grid["min_px"]:
-            setting = {**model.counting, "radius": radius, "nms": nms, "min_prob": min_prob, "min_px": min_px, "readout": "votes"}
-            tried.append({**setting, **accuracy_table(vote_counting.counts_of(masses, min_px), frames)})
-    expected = vote_counting.expected_counts(probs, density)
-    for round_at in grid["round_at"]:
-        setting = {**model.counting, "readout": "density", "round_at": round_at}
-        tried.append({**setting, **accuracy_table(vote_counting.density_counts(expected, round_at), frames)})
-    best = max(tried, key=lambda r: r["val/count_accuracy"])
-    return {k: best[k] for k in vote_counting.DEFAULT_COUNTING}, best, tried
-
-
 def calibrate_file(path: Path, val, device) -> dict:
     """Calibrate the counting settings of the perception file at ``path`` on ``val`` and write them into it."""
     model, meta = load_perception(path)
@@ -146,46 +81,6 @@ def calibrate_file(path: Path, val, device) -> dict:
     print(f"counting settings chosen on {val.shape[0]} held-out frames: {best} -> val count accuracy "
           f"{after['val/count_accuracy']:.3f} (before: {meta.get('val', {}).get('val/count_accuracy', float('nan')):.3f})")
     return after
-
-
-def init_weights(model: CountingPerception, path: str) -> None:
-    """Start from a perception file's weights (same architecture); heads it lacks keep their initialisation,
-    and a depth perception started from an rgb file gets its stems' rgb weights with the depth channel's at zero
-    (so it starts exactly where the rgb file stands)."""
-    blob = load_versioned(path, PERCEPTION_FORMAT, PERCEPTION_VERSION, what="perception file (init_from)",
-                          hint="name a perception.pt of recipes/train_perception.py")
-    state = dict(blob["state_dict"])
-    own = model.state_dict()
-    for name in STEMS:
-        if name in state and name in own and state[name].shape[1] == 3 and own[name].shape[1] == 4:
-            state[name] = torch.cat([state[name], torch.zeros_like(state[name][:, :1])], 1)
-    try:
-        missing, unexpected = model.load_state_dict(state, strict=False)
-        shapes = ""
-    except RuntimeError as error:              # a tensor of another shape (widths, a depth file into an rgb net)
-        missing, unexpected, shapes = [], [], f"; {str(error).strip().splitlines()[-1].strip()}"
-    if shapes or unexpected or any(not k.startswith(("density.", "detail.")) for k in missing):
-        raise ValueError(f"init_from={path} does not fit model.widths={list(model.widths)}, model.detail={model.detail_width}, "
-                         f"model.backbone={model.backbone}, model.depth={model.depth} "
-                         f"(missing {missing[:4]}, unexpected {unexpected[:4]}{shapes}): match the architecture it was trained with")
-    print(f"started from {path} (new heads: {sorted({k.split('.')[0] for k in missing}) or 'none'})")
-
-
-def random_crop(size: int, *images: torch.Tensor) -> tuple[tuple[torch.Tensor, ...], torch.Tensor]:
-    """The same random ``size`` × ``size`` window of each frame's images (rgb, object map, depth: [B, ..., S, S];
-    the object map the second), at even offsets so that its output cells are the whole frame's, and each slot's
-    pixels in the uncropped object map [B, 50] (``keys.SLOT_AREA``: a cut object keeps its whole mass per cell)."""
-    omap = images[1]
-    b, full = omap.shape[0], omap.shape[-1]
-    slot_area = slot_pixels(omap)
-    dev = omap.device
-    ys = torch.randint((full - size) // 2 + 1, (b,), device=dev) * 2
-    xs = torch.randint((full - size) // 2 + 1, (b,), device=dev) * 2
-    rows = (ys[:, None] + torch.arange(size, device=dev))[:, :, None]           # [B, size, 1]
-    cols = (xs[:, None] + torch.arange(size, device=dev))[:, None, :]           # [B, 1, size]
-    batch = torch.arange(b, device=dev)[:, None, None]
-    crops = tuple(x[batch, ..., rows, cols].movedim(3, 1) if x.dim() == 4 else x[batch, rows, cols] for x in images)
-    return crops, slot_area
 
 
 def subsample(rows: torch.Tensor, limit: int | None, seed: int) -> torch.Tensor:
@@ -274,7 +169,7 @@ def _train(cfg: DictConfig, out: Path) -> dict:
         model.load_imagenet()
     model.to(device)
     if cfg.init_from:
-        init_weights(model, cfg.init_from)
+        init_from_file(model, cfg.init_from)
     loss = PerceptionLoss(model, vote_weight=cfg.train.vote_weight, density_weight=cfg.train.density_weight)
     optim = torch.optim.AdamW(model.parameters(), lr=cfg.train.lr, weight_decay=cfg.train.weight_decay)
     steps = int(cfg.train.steps)

@@ -42,6 +42,23 @@ def slot_pixels(object_map: torch.Tensor) -> torch.Tensor:
     return torch.bincount(ids.flatten(), minlength=b * n).view(b, n)[:, 1:].float()
 
 
+def random_crop(size: int, *images: torch.Tensor) -> tuple[tuple[torch.Tensor, ...], torch.Tensor]:
+    """The same random ``size`` × ``size`` window of each frame's images (rgb, object map, depth: [B, ..., S, S];
+    the object map the second), at even offsets so that its output cells are the whole frame's, and each slot's
+    pixels in the uncropped object map [B, 50] (``keys.SLOT_AREA``: a cut object keeps its whole mass per cell)."""
+    omap = images[1]
+    b, full = omap.shape[0], omap.shape[-1]
+    slot_area = slot_pixels(omap)
+    dev = omap.device
+    ys = torch.randint((full - size) // 2 + 1, (b,), device=dev) * 2
+    xs = torch.randint((full - size) // 2 + 1, (b,), device=dev) * 2
+    rows = (ys[:, None] + torch.arange(size, device=dev))[:, :, None]           # [B, size, 1]
+    cols = (xs[:, None] + torch.arange(size, device=dev))[:, None, :]           # [B, 1, size]
+    batch = torch.arange(b, device=dev)[:, None, None]
+    crops = tuple(x[batch, ..., rows, cols].movedim(3, 1) if x.dim() == 4 else x[batch, rows, cols] for x in images)
+    return crops, slot_area
+
+
 def crop_counts(visible_area: torch.Tensor, object_classes: torch.Tensor, num_classes: int, inside: torch.Tensor,
                 slot_area: torch.Tensor) -> torch.Tensor:
     """float [B, K-1]: ``countable_counts`` of a crop: each countable object weighs the share of its pixels that

@@ -264,6 +264,33 @@ def load_perception(path: str | Path) -> tuple[CountingPerception, dict]:
     return model.eval(), dict(blob.get("meta", {}))
 
 
+# the convolutions that read the input image (a depth perception's read a fourth channel)
+STEMS = ("down.0.0.weight", "detail.0.0.weight")
+
+
+def init_from_file(model: CountingPerception, path: str) -> None:
+    """Start from a perception file's weights (same architecture); heads it lacks keep their initialisation,
+    and a depth perception started from an rgb file gets its stems' rgb weights with the depth channel's at zero
+    (so it starts exactly where the rgb file stands)."""
+    blob = load_versioned(path, PERCEPTION_FORMAT, PERCEPTION_VERSION, what="perception file (init_from)",
+                          hint="name a perception.pt of recipes/train_perception.py")
+    state = dict(blob["state_dict"])
+    own = model.state_dict()
+    for name in STEMS:
+        if name in state and name in own and state[name].shape[1] == 3 and own[name].shape[1] == 4:
+            state[name] = torch.cat([state[name], torch.zeros_like(state[name][:, :1])], 1)
+    try:
+        missing, unexpected = model.load_state_dict(state, strict=False)
+        shapes = ""
+    except RuntimeError as error:              # a tensor of another shape (widths, a depth file into an rgb net)
+        missing, unexpected, shapes = [], [], f"; {str(error).strip().splitlines()[-1].strip()}"
+    if shapes or unexpected or any(not k.startswith(("density.", "detail.")) for k in missing):
+        raise ValueError(f"init_from={path} does not fit model.widths={list(model.widths)}, model.detail={model.detail_width}, "
+                         f"model.backbone={model.backbone}, model.depth={model.depth} "
+                         f"(missing {missing[:4]}, unexpected {unexpected[:4]}{shapes}): match the architecture it was trained with")
+    print(f"started from {path} (new heads: {sorted({k.split('.')[0] for k in missing}) or 'none'})")
+
+
 # what a perception file's architecture may ask for before anything is allocated (a crafted width would take GBs)
 LIMITS = {"num_classes": 1024, "image_size": 2048, "detail": 512, "width": 4096}
 

@@ -9,11 +9,13 @@ from tensordict import TensorDict
 from mqa_rl import keys
 from mqa_rl.collectors.perception_frames import check_disjoint, scene_fingerprint
 from mqa_rl.collectors.store import load_records
-from mqa_rl.losses.perception import PerceptionLoss, countable_counts, crop_counts, perception_targets, slot_pixels
+from mqa_rl.losses.perception import (PerceptionLoss, countable_counts, crop_counts, perception_targets, random_crop,
+                                     slot_pixels)
 from mqa_rl.modules import vote_counting
-from mqa_rl.modules.perception import CountingPerception, load_perception, save_perception
+from mqa_rl.modules.perception import CountingPerception, init_from_file, load_perception, save_perception
 from mqa_rl.modules.vqa_ensemble import VQAEnsemble
 from mqa_rl.modules.vqa import VQAModel, load_vqa, save_vqa
+from mqa_rl.training.count_calibration import count_accuracy_table
 from mqa_rl.transforms.episode_stats import COUNTABLE_PX
 
 K = 8          # classes incl. background in these synthetic frames
@@ -62,12 +64,26 @@ def test_the_density_holds_a_unit_mass_per_countable_object_only():
     assert countable_counts(visible[None], classes[None], K)[0].tolist() == [0, 0, 2, 0, 1, 0, 1]
 
 
+def test_count_accuracy_scores_the_classes_present_in_each_frames_scene_by_level():
+    """A (frame, class) pair counts when the class is in the frame's scene: right where the count equals the
+    objects with >= 20 visible px, absent classes left out, every level apart."""
+    from tensordict import TensorDict
+
+    classes = torch.zeros(2, 50, dtype=torch.long)
+    classes[:, :3] = torch.tensor([1, 1, 2])                 # two of class 1, one of class 2 in both frames
+    visible = torch.zeros(2, 50)
+    visible[:, :3] = torch.tensor([[30.0, 30.0, 5.0], [30.0, 10.0, 25.0]])
+    frames = TensorDict({keys.OBJECT_CLASSES: classes, keys.FRAME_VISIBLE: visible,
+                         keys.LEVEL: torch.tensor([0, 2])}, batch_size=[2])
+    pred = torch.zeros(2, K - 1, dtype=torch.long)
+    pred[0, 0], pred[1, 0], pred[1, 1] = 2, 2, 1            # frame 0 right twice; frame 1 once (class 1 shows 1)
+    table = count_accuracy_table(pred, frames)
+    assert table == {"val/count_accuracy": 0.75, "val/count_accuracy_easy": 1.0, "val/count_accuracy_hard": 0.5}
+
+
 def test_a_crops_targets_are_the_whole_frames_targets_cropped():
     """Training on crops (train.crop): a cut object keeps the whole frame's mass per cell and counts by the share of
     its pixels inside, so the crop's density and count targets are the whole frame's, cropped."""
-    from conftest import load_recipe
-
-    random_crop = load_recipe("train_perception").random_crop
     omap, classes, visible = synthetic_frame()
     rgb = torch.randint(0, 256, (1, 3, 112, 112), dtype=torch.uint8)
     frac, _, _, density = perception_targets(omap[None], classes[None], visible[None], K, 56)
@@ -476,18 +492,15 @@ def test_a_depth_perception_reads_the_depth_image_and_asks_for_it(tmp_path):
 def test_a_depth_perception_started_from_an_rgb_file_starts_where_it_stands(tmp_path):
     """init_from an rgb file: the stem's rgb weights carried over, the depth channel's at zero, so the depth
     perception's outputs equal the rgb file's until training moves them."""
-    from conftest import load_recipe
-
     torch.manual_seed(0)
     rgb_model = CountingPerception(K, widths=(8, 8, 16, 16)).eval()
     path = save_perception(rgb_model, tmp_path / "rgb.pt", {})
     depth_model = CountingPerception(K, widths=(8, 8, 16, 16), depth=True)
-    load_recipe("train_perception").init_weights(depth_model, str(path))
+    init_from_file(depth_model, str(path))
     rgb = torch.randint(0, 255, (2, 3, 224, 224), dtype=torch.uint8)
     depth = torch.rand(2, 1, 224, 224) + 1.5
     for a, b in zip(rgb_model.predict(rgb), depth_model.eval().predict(rgb, depth)):
         assert torch.equal(a, b)
     assert depth_model.down[0][0].weight[:, 3].abs().sum() == 0
     with pytest.raises(ValueError, match="does not fit"):                     # not the other way round
-        load_recipe("train_perception").init_weights(CountingPerception(K, widths=(8, 8, 16, 16)),
-                                                     str(save_perception(depth_model, tmp_path / "d.pt", {})))
+        init_from_file(CountingPerception(K, widths=(8, 8, 16, 16)), str(save_perception(depth_model, tmp_path / "d.pt", {})))
