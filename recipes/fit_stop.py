@@ -18,8 +18,6 @@ once, after k pushes, never) and the hindsight best; then refitted on all episod
 
 from __future__ import annotations
 
-import hashlib
-import io
 import json
 import time
 from pathlib import Path
@@ -28,60 +26,18 @@ import hydra
 import torch
 from omegaconf import DictConfig, OmegaConf
 
-from mqa_rl import keys
 from mqa_rl.data.dataset import MQADataset, dataset_fingerprint
-from mqa_rl.files import load_tensors, write_atomic
-from mqa_rl.modules.learned_stop import FEATURES, policy_fingerprint, policy_net, reading_env_kwargs, stop_features
-from mqa_rl.modules.perceived_count import READING, PerceivedCount, token_channels
+from mqa_rl.files import write_atomic
+from mqa_rl.modules.learned_stop import policy_fingerprint, policy_net, reading_env_kwargs
+from mqa_rl.modules.perceived_count import PerceivedCount, token_channels
 from mqa_rl.modules.stop_margin import StopMargin
 from mqa_rl.modules.trained_policy import load_greedy, read_run_config
 from mqa_rl.training.optimal_stopping import fit_stop_critic, fixed_rules, stopped_chi
-from mqa_rl.transforms.episode_stats import mean_target_chi, uncountable_share
+from mqa_rl.training.stop_trajectories import cached_trajectories, collect_trajectories, held_out, save_trajectories
 from mqa_rl.transforms.mqa_env import make_mqa_env
 from mqa_rl.transforms.push_memory import memory_radius
 
 VALUES = ("chi", "uncountable")     # what the stop minimises; both are kept per state
-
-
-def padded(x: torch.Tensor, length: int) -> torch.Tensor:
-    """``x`` cut or extended with its last row to ``length`` rows (an episode that ended early stays where it was)."""
-    pad = length - x.shape[0]
-    return torch.cat([x, x[-1:].expand(pad, *x.shape[1:])]) if pad > 0 else x[:length]
-
-
-def collect_level(env, policy, net, episodes: int, max_pushes: int, reading: PerceivedCount | None = None) -> dict:
-    """Never-stopping episodes of ``policy``: features [E, T, F] (with ``reading``'s after the shipped ones), χ and
-    the uncountable share [E, T + 1], valid [E, T], scene ids."""
-    width = len(FEATURES) + (len(READING) if reading is not None else 0)
-    feats, chis, missed, valid, scenes = [], [], [], [], []
-    with torch.no_grad():
-        for _ in range(episodes):
-            rollout = env.rollout(max_pushes + 1, policy, break_when_any_done=True)
-            if not bool(rollout[0].get(keys.TARGET_MASK).any()):
-                continue                                   # no target (a count of 0): χ undefined
-            steps = rollout.shape[0]
-            f = stop_features(net, rollout, max_pushes)
-            if reading is not None:
-                f = torch.cat([f, reading.read(rollout)], -1)
-            chi = torch.cat([mean_target_chi(rollout).squeeze(-1), mean_target_chi(rollout["next"][-1:]).squeeze(-1)])
-            miss = torch.cat([uncountable_share(rollout), uncountable_share(rollout["next"][-1:])])
-            feats.append(padded(f, max_pushes))
-            chis.append(padded(chi, max_pushes + 1))
-            missed.append(padded(miss, max_pushes + 1))
-            valid.append(torch.arange(max_pushes) < min(steps, max_pushes))
-            scenes.append(env.base_env.question.scene_id)
-    if not feats:
-        return {"features": torch.zeros(0, max_pushes, width), "chi": torch.zeros(0, max_pushes + 1),
-                "uncountable": torch.zeros(0, max_pushes + 1), "valid": torch.zeros(0, max_pushes, dtype=torch.bool),
-                "scenes": []}
-    return {"features": torch.stack(feats), "chi": torch.stack(chis), "uncountable": torch.stack(missed),
-            "valid": torch.stack(valid), "scenes": scenes}
-
-
-def held_out(scenes: list[str], fraction: float) -> torch.Tensor:
-    """[E] bool: the episodes of a fixed ``fraction`` of the scenes (by a hash of their id)."""
-    cut = int(round(fraction * 1000))
-    return torch.tensor([int(hashlib.sha256(s.encode()).hexdigest(), 16) % 1000 < cut for s in scenes])
 
 
 def score(critic, data: dict, rows: torch.Tensor, value: str = "chi") -> dict:
@@ -90,15 +46,6 @@ def score(critic, data: dict, rows: torch.Tensor, value: str = "chi") -> dict:
         stop = (critic(f) >= 0) & valid
     return {"episodes": int(rows.sum()), "learned": float(stopped_chi(chi, stop, valid).mean()),
             "learned_pushes": float((~stop & valid).long().cumprod(1).sum(1).float().mean()), **fixed_rules(chi, valid)}
-
-
-def cached_trajectories(path: Path, meta: dict) -> dict | None:
-    """An earlier run's trajectories of the same policy and questions, read as tensors only (a cache in a
-    folder a user was handed must not run code), or None."""
-    if not path.is_file():
-        return None
-    saved = load_tensors(path, what="trajectories cache", hint="delete it to collect the trajectories again")
-    return saved["data"] if isinstance(saved, dict) and saved.get("meta") == meta else None
 
 
 @hydra.main(config_path="conf", config_name="fit_stop", version_base="1.3")
@@ -141,10 +88,9 @@ def main(cfg: DictConfig) -> None:
                 continue
             env.base_env.set_seed(int(cfg.seed))
             tick = time.time()
-            data = collect_level(env, StopMargin(actor, float("inf")), net, int(cfg.episodes_per_level), max_pushes, reading)
-            buffer = io.BytesIO()
-            torch.save({"meta": meta, "data": data}, buffer)
-            write_atomic(path, buffer.getvalue())
+            data = collect_trajectories(env, StopMargin(actor, float("inf")), net, int(cfg.episodes_per_level), max_pushes,
+                                        reading)
+            save_trajectories(path, meta, data)
             levels[level] = data
             print(f"{level}: {data['chi'].shape[0]} episodes with targets in {time.time() - tick:.0f} s", flush=True)
         finally:

@@ -6,6 +6,7 @@ import torch
 
 from mqa_rl import keys
 from mqa_rl.modules.privileged_policy import PrivilegedPushPolicy
+from mqa_rl.transforms.episode_stats import uncountable_share
 from conftest import compose_recipe_config, load_recipe
 
 
@@ -25,9 +26,8 @@ def test_fit_stop_refuses_an_unknown_value(tmp_path):
 
 
 def test_uncountable_share_counts_targets_below_the_counters_line():
-    fit_stop = load_recipe("fit_stop")
     from tensordict import TensorDict
 
     td = TensorDict({keys.TARGET_MASK: torch.tensor([[True, True, False, True], [False] * 4]),
                      keys.VISIBLE_AREA: torch.tensor([[25.0, 19.0, 0.0, 0.0], [50.0, 0.0, 0.0, 0.0]])}, batch_size=[2])
-    assert fit_stop.uncountable_share(td).tolist() == pytest.approx([2 / 3, 0.0])
+    assert uncountable_share(td).tolist() == pytest.approx([2 / 3, 0.0])

@@ -6,7 +6,9 @@ import pytest
 import torch
 from conftest import load_recipe
 
+from mqa_rl.evaluation.unit_reuse import reuse_episodes
 from mqa_rl.files import load_tensors
+from mqa_rl.training.stop_trajectories import cached_trajectories, save_trajectories
 
 RAN = []
 
@@ -29,19 +31,17 @@ def test_load_tensors_refuses_pickled_objects_and_reads_plain_results(tmp_path):
 
 
 def test_evaluate_policy_baselines_and_fit_stop_caches_are_not_unpickled(tmp_path):
-    evaluate_policy = load_recipe("evaluate_policy")
     (tmp_path / "episodes").mkdir()
     torch.save({"meta": Payload(), "metrics": {}}, tmp_path / "episodes" / "random_easy.pt")
     with pytest.raises(ValueError, match="random_easy.pt.*never unpickled"):
-        evaluate_policy.reuse_episodes(tmp_path, "random", {"level": "easy"})
+        reuse_episodes(tmp_path, "random", {"level": "easy"})
     assert RAN == []
-    fit_stop = load_recipe("fit_stop")
     torch.save({"meta": Payload(), "data": {}}, tmp_path / "easy.pt")
     with pytest.raises(ValueError, match="easy.pt.*never unpickled"):
-        fit_stop.cached_trajectories(tmp_path / "easy.pt", {"level": "easy"})
-    torch.save({"meta": {"level": "easy"}, "data": {"chi": torch.zeros(2)}}, tmp_path / "plain.pt")
-    assert fit_stop.cached_trajectories(tmp_path / "plain.pt", {"level": "easy"})["chi"].shape == (2,)
-    assert fit_stop.cached_trajectories(tmp_path / "plain.pt", {"level": "hard"}) is None
+        cached_trajectories(tmp_path / "easy.pt", {"level": "easy"})
+    save_trajectories(tmp_path / "plain.pt", {"level": "easy"}, {"chi": torch.zeros(2)})
+    assert cached_trajectories(tmp_path / "plain.pt", {"level": "easy"})["chi"].shape == (2,)
+    assert cached_trajectories(tmp_path / "plain.pt", {"level": "hard"}) is None
     assert RAN == []
 
 
