@@ -11,7 +11,7 @@ QUESTION = "question"                         # int64 [L], question tokens, 0-pa
 ACTION = "action"                             # int64 [], push index or STOP
 ACTION_MASK = "action_mask"                   # bool [NUM_ACTIONS] pushes whose start (from depth) is inside the bin, and stop
 PUSHED = "pushed"                             # bool [NUM_PUSHES] pushes made this episode, with neighbours (PushMemory)
-RESET_QUESTION = "reset_question"             # int64 [1] state: the question index the next reset takes (-1 random)
+RESET_QUESTION = "reset_question"             # int64 [1] state (and observed, -1): the question index the next reset takes (-1 random)
 REWARD = "reward"
 
 # measurements of the scene (padded to MAX_OBJECTS, see OBJECT_MASK)

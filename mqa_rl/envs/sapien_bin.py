@@ -6,7 +6,8 @@ Task sheet
   poses at every reset (bit-identical physics; an in-place restore is not).
 * **Question**: sampled from the chosen split / difficulty levels / question types, or fixed with
   ``env.reset(question_id="scene_003/counting/can")`` (or a ``"reset_question"`` index into
-  ``MQADataset.questions`` in the reset tensordict, for batched and remote envs; negative: random).
+  ``MQADataset.questions`` in the reset tensordict, for batched and remote envs; negative: random; every
+  observation carries it as -1, so that batched envs keep it).
 * **Observation**: ``rgb`` uint8 [3, H, W], ``depth`` float32 [1, H, W] (metres), ``question`` int64
   tokens [L], and ``info`` measurements (see ``mqa_rl.keys``): object positions, visible area A_s,
   full projected area A_t, overlap χ, target mask, stop flag, executed push.
@@ -161,9 +162,11 @@ class SapienBinEnv(EnvBase):
             size = self.answer_camera.height
             self.observation_spec[keys.ANSWER_RGB] = Bounded(0, 255, shape=(3, size, size), dtype=torch.uint8)
         self.action_spec = Categorical(actions.NUM_ACTIONS, shape=(), dtype=i64)
-        # Read by reset (reset returns -1): declared as state so that a TransformedEnv passes it on.
-        self.state_spec = Composite({keys.RESET_QUESTION: Bounded(-1, len(self.dataset.questions) - 1,
-                                                                  shape=(1,), dtype=i64)})
+        # Read by reset: declared as state so that a TransformedEnv passes it on, and observed (always -1, a
+        # random question next) so that SerialEnv / ParallelEnv, which return only observations, keep it too.
+        reset_question = Bounded(-1, len(self.dataset.questions) - 1, shape=(1,), dtype=i64)
+        self.observation_spec[keys.RESET_QUESTION] = reset_question
+        self.state_spec = Composite({keys.RESET_QUESTION: reset_question.clone()})
         self.reward_spec = Unbounded(shape=(1,), dtype=f32)
         self.done_spec = Composite(
             done=Categorical(2, shape=(1,), dtype=torch.bool),
@@ -211,8 +214,7 @@ class SapienBinEnv(EnvBase):
         self._tokens = tokens
         obs = self._observe(None)
         self._last = obs
-        # The state the next reset reads unless told otherwise: -1, a random question (auto-resets stay random).
-        return obs.clone(False).set(keys.RESET_QUESTION, torch.full((1,), -1, dtype=torch.int64))
+        return obs.clone(False)
 
     # ------------------------------------------------------------------------------------ step
     def _validate_action(self, tensordict: TensorDictBase) -> int:
@@ -337,6 +339,8 @@ class SapienBinEnv(EnvBase):
             keys.QUESTION: self._tokens.clone(),
             keys.ACTION_MASK: actions.start_points_mask(self.dataset.bin, self._starts),
             keys.INFO: info,
+            # the state the next reset reads unless told otherwise: -1, a random question (auto-resets stay random)
+            keys.RESET_QUESTION: torch.full((1,), -1, dtype=torch.int64),
         }
         if self.answer_observation:
             obs[keys.ANSWER_RGB] = self.answer_image()

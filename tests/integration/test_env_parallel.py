@@ -1,4 +1,4 @@
-"""SapienBinEnv inside TorchRL's Collector, MultiSyncCollector (2 worker processes) and ParallelEnv."""
+"""SapienBinEnv inside TorchRL's Collector, MultiSyncCollector (2 worker processes), SerialEnv and ParallelEnv."""
 
 import functools
 
@@ -71,3 +71,23 @@ def test_parallel_env_with_batched_reward_stack(small_dataset_dir, small_dataset
         r[keys.OVERLAP], nxt[keys.OVERLAP], r[keys.TARGET_MASK]))
     torch.testing.assert_close(nxt[keys.LOCAL_OCCLUSION].squeeze(-1), local_occlusion_reward(
         r[keys.OVERLAP], nxt[keys.OVERLAP], r[keys.TARGET_MASK]))
+
+
+@pytest.mark.timeout(300)
+@pytest.mark.parametrize("batched", ["SerialEnv", "ParallelEnv"])
+def test_batched_envs_pass_check_env_specs_and_pass_on_reset_question(sparse_dataset, batched):
+    """A TorchRL user batches envs first: the specs hold there too (the state key ``reset_question`` is returned
+    by the batched reset, not only declared), and a ``reset_question`` per env reaches each env."""
+    import torchrl.envs
+    from tensordict import TensorDict
+    from torchrl.envs.utils import check_env_specs
+
+    make = functools.partial(SapienBinEnv, str(sparse_dataset.root), split=None, max_pushes=2, image_size=112)
+    env = getattr(torchrl.envs, batched)(2, make)
+    try:
+        check_env_specs(env, seed=0)
+        td = env.reset(TensorDict({keys.RESET_QUESTION: torch.tensor([[1], [0]])}, [2]))
+    finally:
+        env.close()
+    assert td[keys.QUESTION_INDEX].flatten().tolist() == [1, 0]
+    assert td[keys.RESET_QUESTION].flatten().tolist() == [-1, -1]       # auto-resets from here pick at random
