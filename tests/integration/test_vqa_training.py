@@ -17,6 +17,7 @@ from mqa_rl.losses.vqa import VQALoss
 from mqa_rl.modules.vqa import VQAModel, image_digest, load_vqa, vqa_module
 from mqa_rl.modules.vqa_encoder import FrameEncoder, PretrainHeads, load_encoder, save_encoder
 from mqa_rl.training.frame_pack import load_frame_pack
+from mqa_rl.training.vqa_build import build_model
 from mqa_rl.training.vqa_data import Batches, encode_store, encoder_fingerprint, load_answering_records, pretraining_frames
 from mqa_rl.envs.dihedral import dihedral
 from mqa_rl.verified_checkpoint import CheckpointCorrupt
@@ -306,9 +307,8 @@ def test_encoder_head_width_gives_the_heads_context_and_the_vqa_takes_the_files_
     again, _ = load_encoder(path)
     assert again.head_width == 16
     torch.testing.assert_close(again.eval().class_maps(x), encoder.eval().class_maps(x))
-    train_vqa = load_recipe("train_vqa")
     cfg = compose_recipe_config("train_vqa", [f"dataset={small_dataset.root}", f"encoder.weights={path}", "vqa=classes"])
-    model, _ = train_vqa.build_model(cfg, small_dataset)
+    model, _ = build_model(cfg, small_dataset)
     assert model.config["encoder_head_width"] == 16
     torch.testing.assert_close(model.encoder.eval().class_maps(x), encoder.class_maps(x))
 
