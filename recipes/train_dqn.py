@@ -305,8 +305,7 @@ def _train(cfg: DictConfig, out: Path, created: bool) -> dict:
     # what recipes/evaluate_policy.py rebuilds the network from; rewritten by every (resumed) invocation, so it
     # states the settings that made the newest checkpoint (e.g. a lengthened demos.pretrain_updates)
     write_atomic(out / "config.yaml", OmegaConf.to_yaml(OmegaConf.create(config)))
-    logger = RunLogger(out, wandb=cfg.logger.wandb, project=cfg.logger.project,
-                       exp_name=f"dqn_{cfg.reward.name}_{cfg.model.trunk}", config=config)
+    logger = RunLogger(out, cfg.logger, exp_name=f"dqn_{cfg.reward.name}_{cfg.model.trunk}", config=config)
 
     if demos is not None and state["demo_pretrain_updates"] < int(demo_cfg["pretrain_updates"]):
         pretrain_on_demonstrations(state, int(demo_cfg["pretrain_updates"]), demo_batch, demo_loss, aux_loss, optim, params,

@@ -2,7 +2,7 @@
 
 ``episode_frames`` turns a rollout (a tensordict of shape [T] from ``env.rollout``) into annotated
 frames; ``write_video`` writes mp4 (``.mp4``), WebM (``.webm``, VP8: what browsers play, OpenCV's
-mp4 codec is not) or animated gif (``.gif``) with OpenCV, atomically.
+mp4 codec is not) or animated gif (``.gif``) with OpenCV, atomically; ``read_video`` reads one back (for a dashboard).
 """
 
 from __future__ import annotations
@@ -89,3 +89,19 @@ def write_video(frames: list[np.ndarray], path, fps: float = 1.5) -> Path:
     finally:
         tmp.unlink(missing_ok=True)
     return path
+
+
+def read_video(path) -> list[np.ndarray]:
+    """The RGB frames of a video written by ``write_video`` (.mp4, .webm or .gif)."""
+    path = Path(path)
+    if path.suffix.lower() == ".gif":
+        ok, anim = cv2.imreadanimation(str(path))
+        frames = list(anim.frames) if ok else []
+    else:
+        capture, frames = cv2.VideoCapture(str(path)), []
+        while (read := capture.read())[0]:
+            frames.append(read[1])
+        capture.release()
+    if not frames:
+        raise ValueError(f"OpenCV read no frame from {path}")
+    return [cv2.cvtColor(f[..., :3], cv2.COLOR_BGR2RGB) for f in frames]

@@ -1,22 +1,29 @@
-"""``RunLogger``: the training run's metrics through TorchRL's loggers (CSV always, wandb offline by
-default), plus images and videos as files next to them.
+"""``RunLogger``: a run's metrics, images, videos and texts, written as files (CSV scalars, media) and to the
+dashboards its ``logger`` settings choose (TensorBoard, MLflow, wandb: ``mqa_rl.training.dashboards``).
 
 CSV scalars land in ``<out_dir>/csv/scalars/<group>/<name>.csv`` (rows ``step,value``, step = collected
-frames); ``recipes/plot_curves.py`` reads them. wandb runs offline under ``<out_dir>/wandb`` (sync them
-later with ``wandb sync``); a resumed run continues the same wandb run id. On resume, rows logged after
-the checkpoint are dropped first (``trim_scalars``), so no step is logged twice.
+frames) whatever the dashboards; ``recipes/plot_curves.py`` reads them. Images are also written to
+``<out_dir>/media``. On resume, rows logged after the checkpoint are dropped first (``trim_scalars``), so no step is
+logged twice. An evaluation of a run logs into the run's own dashboards (``RunLogger.of_run``), leaving its files alone.
 """
 
 from __future__ import annotations
 
 import warnings
 from pathlib import Path
+from typing import Any, Mapping
 
 import cv2
 import numpy as np
+import torch
+from omegaconf import OmegaConf
 from torchrl.record.loggers import CSVLogger
 
+from mqa_rl.envs.video import read_video
 from mqa_rl.files import write_atomic
+from mqa_rl.training.dashboards import held_steps, open_dashboards
+
+VIDEO_FPS = 2
 
 
 def trim_scalars(csv_dir: str | Path, max_step: int, exclude: str | None = None) -> int:
@@ -35,53 +42,109 @@ def trim_scalars(csv_dir: str | Path, max_step: int, exclude: str | None = None)
 
 
 class RunLogger:
-    def __init__(self, out_dir: str | Path, *, wandb: bool, project: str, exp_name: str, config: dict):
-        self.out_dir = Path(out_dir)
-        self.csv = CSVLogger("csv", log_dir=str(self.out_dir))
-        self.media = self.out_dir / "media"
-        self.media.mkdir(parents=True, exist_ok=True)
-        self.wandb = None
-        if wandb:
-            from torchrl.record.loggers import WandbLogger
+    """``settings``: the ``logger`` config group's values (tensorboard, mlflow, wandb, project, ...), as a mapping
+    and/or keywords; ``files=False``: the dashboards alone (an evaluation of the run, see ``of_run``)."""
 
-            id_file = self.out_dir / "wandb_run_id"
-            run_id = id_file.read_text().strip() if id_file.exists() else None
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", DeprecationWarning)
-                self.wandb = WandbLogger(exp_name=exp_name, offline=True, save_dir=str(self.out_dir), project=project,
-                                         log_env_packages=False, config=config, id=run_id, resume="allow" if run_id else None)
-            if run_id is None:
-                id_file.write_text(self.wandb.experiment.id)
-        self.csv.log_hparams(config)
+    def __init__(self, out_dir: str | Path, settings: Mapping[str, Any] | None = None, *, exp_name: str,
+                 config: dict | None = None, files: bool = True, **more_settings):
+        self.out_dir = Path(out_dir)
+        self.csv = CSVLogger("csv", log_dir=str(self.out_dir)) if files else None
+        self.media = self.out_dir / "media"
+        if files:
+            self.media.mkdir(parents=True, exist_ok=True)
+        self.dashboards = open_dashboards(self.out_dir, {**(settings or {}), **more_settings}, exp_name=exp_name,
+                                          config=config)
+        self.held = held_steps(self.dashboards["mlflow"]) if "mlflow" in self.dashboards else {}
+        if self.csv is not None and config is not None:
+            self.csv.log_hparams(config)
+
+    @classmethod
+    def of_run(cls, run: str | Path) -> "RunLogger":
+        """The dashboards of a training run (as its ``config.yaml`` chose them), for an evaluation of it."""
+        settings = OmegaConf.to_container(OmegaConf.load(Path(run) / "config.yaml")).get("logger") or {}
+        return cls(run, settings, exp_name=Path(run).name, files=False)
+
+    def __enter__(self) -> "RunLogger":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
     def log_metrics(self, metrics: dict[str, float], step: int) -> None:
         finite = {k: float(v) for k, v in metrics.items() if v is not None and np.isfinite(v)}
-        for k, v in finite.items():
-            self.csv.log_scalar(k, v, step=step)
-        if self.wandb is not None and finite:
-            self.wandb.log_metrics(finite, step=step)
+        if self.csv is not None:
+            for k, v in finite.items():
+                self.csv.log_scalar(k, v, step=step)
+        for name, dashboard in self.dashboards.items():
+            new = {k: v for k, v in finite.items() if step > self.held.get(k, -1)} if name == "mlflow" else finite
+            if new:
+                dashboard.log_metrics(new, step=step)
 
-    def log_image(self, name: str, image: np.ndarray, step: int) -> Path:
-        path = self.media / f"{name.replace('/', '_')}_{step:07d}.png"
-        ok, png = cv2.imencode(".png", cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
-        if not ok:
-            raise OSError(f"OpenCV cannot encode {name} (step {step}) as PNG")
-        write_atomic(path, png.tobytes())
-        if self.wandb is not None:
-            import wandb
+    def log_image(self, name: str, image: np.ndarray, step: int) -> Path | None:
+        """An RGB image: a PNG in ``media`` (with files) and on every dashboard."""
+        path = None
+        if self.csv is not None:
+            path = self.media / f"{name.replace('/', '_')}_{step:07d}.png"
+            ok, png = cv2.imencode(".png", cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
+            if not ok:
+                raise OSError(f"OpenCV cannot encode {name} (step {step}) as PNG")
+            write_atomic(path, png.tobytes())
+        for kind, dashboard in self.dashboards.items():
+            if kind == "tensorboard":
+                dashboard.experiment.add_image(name, image, step, dataformats="HWC")
+            elif kind == "mlflow":
+                import mlflow
 
-            self.wandb.experiment.log({name: wandb.Image(image)})
+                mlflow.log_image(image, key=name, step=step)
+            else:
+                import wandb
+
+                dashboard.experiment.log({name: wandb.Image(image)})
         return path
 
-    def log_video_file(self, name: str, path: Path, step: int) -> None:
-        if self.wandb is not None:
-            import wandb
+    def log_figure(self, name: str, path: str | Path, step: int) -> None:
+        """A figure file (PNG) on every dashboard."""
+        image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+        if image is None:
+            raise OSError(f"OpenCV cannot read the figure {path}")
+        self.log_image(name, cv2.cvtColor(image, cv2.COLOR_BGR2RGB), step)
 
+    def log_video_file(self, name: str, path: Path, step: int) -> None:
+        """A video written by ``mqa_rl.envs.video.write_video``, on every dashboard (the file stays where it is)."""
+        for kind, dashboard in self.dashboards.items():
             try:
-                self.wandb.experiment.log({name: wandb.Video(str(path))})
-            except Exception as error:  # wandb's video support needs optional packages; the file stays
-                warnings.warn(f"wandb could not log video {path}: {error}", stacklevel=2)
+                if kind == "tensorboard":
+                    video = torch.from_numpy(np.stack(read_video(path))).permute(0, 3, 1, 2)[None]
+                    dashboard.log_video(name, video, step=step, fps=VIDEO_FPS)
+                elif kind == "mlflow":
+                    import mlflow
+
+                    mlflow.log_artifact(str(path), f"{name}/{step:07d}")
+                else:
+                    import wandb
+
+                    dashboard.experiment.log({name: wandb.Video(str(path))})
+            except Exception as error:  # video support needs optional packages (moviepy); the file stays
+                warnings.warn(f"{kind} could not log video {path}: {error}", stacklevel=2)
+
+    def log_text(self, name: str, markdown: str, step: int) -> None:
+        """A table or report (markdown) on every dashboard."""
+        for kind, dashboard in self.dashboards.items():
+            if kind == "tensorboard":
+                dashboard.experiment.add_text(name, markdown, step)
+            elif kind == "mlflow":
+                import mlflow
+
+                mlflow.log_text(markdown, f"{name}/{step:07d}.md")
+            else:
+                dashboard.log_str(name, markdown, step=step)
 
     def close(self) -> None:
-        if self.wandb is not None:
-            self.wandb.experiment.finish()
+        for kind, dashboard in self.dashboards.items():
+            if kind == "mlflow":
+                import mlflow
+
+                mlflow.end_run()
+            else:
+                dashboard.close()
+        self.dashboards = {}
