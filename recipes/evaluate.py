@@ -45,6 +45,7 @@ from mqa_rl.files import write_atomic
 from mqa_rl.modules.frozen_policies import resolve_checkpoint, system_spec
 from mqa_rl.modules.vqa import CHECKPOINT_NAME, answer_size_for, load_vqa
 from mqa_rl.modules.vqa_ensemble import VQAEnsemble
+from mqa_rl.training.run_logger import RunLogger
 from mqa_rl.training.vqa_data import (IMAGE_KEYS, RECORD_KEYS, encode_store, encoder_fingerprint, frame_keys,
                                      load_answering_records)
 
@@ -320,6 +321,10 @@ def evaluate(cfg: DictConfig) -> dict:
             plot_reward_curves(runs, out / "fig7_rewards.png")
     write_atomic(out / "by_scene.md", report.by_scene_markdown(results))
     write_atomic(out / "results.json", json.dumps(results, indent=1, default=float))
+    with RunLogger(out, cfg.logger, exp_name="table3", files=False) as dashboards:    # beside the runs, under runs/
+        for name in ("report", "per_type", "policy"):
+            dashboards.log_text(f"table3/{name}", (out / f"{name}.md").read_text(), 0)
+        dashboards.log_figure("table3/figure", out / "table3.png", 0)
     print(f"\n{head}\n\n{t3}\n\n{paired}\n")
     print("\n".join(reading))
     print(f"\n{per_type}\n\n{policy}\n\nwritten to {out}")

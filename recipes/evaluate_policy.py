@@ -44,8 +44,9 @@ from mqa_rl.evaluation.unit_reuse import content_digest, episodes_meta, greedy_i
 from mqa_rl.evaluation.policy_units import POLICIES, close_envs, run_units
 from mqa_rl.files import write_atomic
 from mqa_rl.modules.kept_frame import reading_env_options
-from mqa_rl.modules.trained_policy import read_run_config
+from mqa_rl.modules.trained_policy import newest_run_checkpoint, read_run_config
 from mqa_rl.training.run_dir import RunLock
+from mqa_rl.training.run_logger import RunLogger
 from mqa_rl.transforms.push_memory import memory_radius
 
 REPORTED = ("reward", "pushes", "final_simple", "chi_end", "chi_change", "hidden_end", "into_view", "out_of_view",
@@ -157,6 +158,15 @@ def _evaluate(cfg: DictConfig) -> dict:
     for name, text in (("results.json", json.dumps(results, indent=2)), ("results.md", "\n".join(lines) + "\n"),
                        ("config.yaml", OmegaConf.to_yaml(cfg, resolve=True))):   # what these figures were measured with
         write_atomic(out / name, text)
+    if cfg.run and (Path(cfg.run) / "checkpoints").is_dir():     # a training run (an export has no dashboard)
+        frames = Path(cfg.checkpoint or newest_run_checkpoint(cfg.run)).name.rsplit("-", 1)[-1]
+        step = int(frames) if frames.isdigit() else 0
+        with RunLogger.of_run(cfg.run) as dashboards:           # at the evaluated checkpoint's frames
+            dashboards.log_text("policy_eval/results", f"`{out}`\n" + "\n".join(lines), step)
+            dashboards.log_metrics({f"policy_eval/{level}/{name}/{k}": row[k]["mean"] for level, rows in results.items()
+                                    for name, row in rows.items() for k in reported}, step)
+            for video in sorted((out / "videos").glob("*")):
+                dashboards.log_video_file(f"policy_eval/{video.stem}", video, step)
     print("\n".join(lines))
     print(f"written to {out}")
     return results
@@ -184,6 +194,8 @@ def evaluate_snapshots(cfg: DictConfig) -> list[tuple[int, dict]]:
     write_atomic(out / "curve.json", json.dumps({"run": str(cfg.run), "points": [{"frames": f, "results": r} for f, r in points]},
                                                 indent=1))
     plot_learning_curves({Path(cfg.run).name: points}, out / "curve.png")
+    with RunLogger.of_run(cfg.run) as dashboards:
+        dashboards.log_figure("policy_eval/learning_curve", out / "curve.png", points[-1][0])
     print(f"learning curve: {out / 'curve.json'}, {out / 'curve.png'}")
     return points
 
