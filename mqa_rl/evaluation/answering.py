@@ -10,7 +10,7 @@
   scenes, as a result on 9-12 test piles per level, or on a held-out set of fresh piles, needs.
 * ``counter_right``: whether a *perfect counter* (counts the targets with ≥ ``min_px`` visible pixels)
   would answer a COUNTING question right from the episode's first or last image: what the images
-  allow, whatever the VQA makes of them (the occlusion benchmark's rule). ``frame=EITHER``: the targets
+  allow, whatever the VQA makes of them. ``frame=EITHER``: the targets
   countable in either image (objects do not vanish between the frames, so what one frame shows is
   evidence the pair holds: the ceiling of a VQA that reads both, ``frame_fusion="max"``).
 * ``calibrated_counter_right``: the same perfect count, mapped to the answer most often seen with that

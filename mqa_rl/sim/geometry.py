@@ -16,7 +16,7 @@ import numpy as np
 
 # The bin: a 40 × 40 cm tote with 45 cm walls (72 l). 20 / 35 / 50 real-size household objects
 # laid flat would cover 1.5 / 2.6 / 3.8 times its floor, so they pile up and hide each other (the
-# paper's premise); measured trade-off against larger bins in benchmarks/occlusion.py and docs/dataset.md.
+# paper's premise); the measured trade-off against a 50 cm bin: docs/notebook/dataset.md.
 BIN_INNER_SIZE = 0.40
 BIN_WALL_HEIGHT = 0.45
 # The camera: straight down from CAMERA_DISTANCE above the floor, its image framing the bin's RIM
