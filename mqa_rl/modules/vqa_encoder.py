@@ -17,7 +17,7 @@ map per class: one unit of mass at the centre of every visible object, so that i
 image is the number of visible objects of the class, as crowd counting does). The 10 × 10
 bottleneck is too coarse to count: with the true class areas per cell, a VQA answered 0.57 / 0.51 /
 0.51 of the COUNTING test questions right from a 10 × 10 map, 0.69 / 0.51 / 0.51 from a 24 × 24 one
-(``benchmarks/vqa_ceiling.py``, docs/results.md "What limits counting").
+(docs/notebook/answering.md, "What limits counting").
 
 An encoder file (``save_encoder`` / ``load_encoder``) holds the encoder's weights and what it was
 trained on; ``recipes/pretrain_vqa_encoder.py`` writes it and ``recipes/train_vqa.py`` loads it
