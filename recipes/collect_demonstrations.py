@@ -1,10 +1,11 @@
 """Collect a teacher's demonstrations on the train split, for the students (train_dqn.py demos.path=).
 
     python recipes/collect_demonstrations.py                     # the image teacher, 600 states -> runs/demos
-    python recipes/collect_demonstrations.py oracle.refine_radius=1 out_dir=runs/demos_refined   # the refined teacher
+    python recipes/collect_demonstrations.py teacher=refined_teacher out_dir=runs/demos_refined   # the refined teacher
     python recipes/train_dqn.py profile=student demos.path=runs/demos ...
 
-The teacher reads the simulator (which target is partly visible, which object stands on it); the states it
+The teacher, a privileged system of recipes/conf/systems.yaml (``teacher=``, its options overridable one by one:
+``oracle.<option>=``), reads the simulator (which target is partly visible, which object stands on it); the states it
 meets and its actions are stored as the replay stores observations (``mqa_rl.collectors.demonstrations``).
 Writes ``out_dir/data`` (a memmap TensorDict) and ``out_dir/demos.json`` (settings, dataset
 fingerprint, action statistics), both renamed into place at the end: a killed run leaves nothing
@@ -29,6 +30,16 @@ from mqa_rl.collectors.demonstrations import DEMOS_META, collect_demonstrations
 from mqa_rl.data.dataset import dataset_fingerprint
 from mqa_rl.envs import actions
 from mqa_rl.envs.sapien_bin import SapienBinEnv
+from mqa_rl.modules.frozen_policies import privileged_options
+from mqa_rl.modules.systems import system_spec
+
+
+def teacher_options(cfg: DictConfig) -> dict:
+    """Every option of the teacher the demonstrations are collected with: the system ``teacher``'s, each overridden
+    by a non-null ``oracle.<option>``."""
+    spec = system_spec(cfg.systems, cfg.teacher, kinds=("privileged",))
+    return privileged_options({**spec, **{k: v for k, v in OmegaConf.to_container(cfg.oracle).items() if v is not None}})
+
 
 def collect(cfg: DictConfig) -> dict:
     out = Path(cfg.out_dir)
@@ -36,14 +47,16 @@ def collect(cfg: DictConfig) -> dict:
         raise FileExistsError(f"{out} already holds demonstrations: choose another out_dir or delete it")
     if not Path(cfg.dataset).exists():
         raise FileNotFoundError(f"dataset {cfg.dataset} does not exist: make it with recipes/make_dataset.py")
+    oracle = teacher_options(cfg)                     # a bad teacher refused before the simulator starts
     torch.manual_seed(cfg.seed)
     env = SapienBinEnv(cfg.dataset, seed=cfg.seed, **OmegaConf.to_container(cfg.env))
     t0 = time.perf_counter()
-    demos = collect_demonstrations(env, cfg.states, progress=cfg.progress, **OmegaConf.to_container(cfg.oracle))
+    demos = collect_demonstrations(env, cfg.states, progress=cfg.progress, **oracle)
     seconds = time.perf_counter() - t0
     act = demos.get(keys.ACTION)
     allowed = demos.get(keys.ACTION_MASK).gather(-1, act[:, None]).squeeze(-1)
-    meta = {**OmegaConf.to_container(cfg, resolve=True), "dataset_sha256": dataset_fingerprint(cfg.dataset),
+    settings = {k: v for k, v in OmegaConf.to_container(cfg, resolve=True).items() if k != "systems"}
+    meta = {**settings, "oracle": oracle, "dataset_sha256": dataset_fingerprint(cfg.dataset),
             "seconds": round(seconds, 1), "stop_fraction": float((act == actions.STOP).float().mean()),
             "masked_fraction": float((~allowed).float().mean()),
             "directions": dict(Counter((act[act != actions.STOP] // (actions.GRID ** 2)).tolist()))}

@@ -9,7 +9,7 @@
 
 Writes ``${root}/rollouts/<questions>/<system>/<split>`` (an ``EpisodeStore``: memmap chunks written
 atomically). Interrupted? Run the same command again: it collects only what is missing. Systems are
-defined in recipes/conf/answering/default.yaml; ``mqa_rl.collectors.rollouts`` says what is stored.
+defined in recipes/conf/systems.yaml; ``mqa_rl.collectors.rollouts`` says what is stored.
 """
 
 from __future__ import annotations
@@ -22,12 +22,12 @@ import hydra
 from omegaconf import DictConfig, OmegaConf
 
 from mqa_rl.collectors.rollouts import collect_split
-from mqa_rl.modules.frozen_policies import system_spec
+from mqa_rl.modules.systems import system_spec
 from mqa_rl.training.signals import exit_on_sigterm
 
 
 def collect(cfg: DictConfig) -> list[dict]:
-    spec = system_spec(OmegaConf.to_container(cfg.systems, resolve=True), cfg.system)
+    spec = system_spec(cfg.systems, cfg.system)
     if not Path(cfg.dataset).exists():
         raise FileNotFoundError(f"dataset {cfg.dataset} does not exist: make it with recipes/make_dataset.py")
     summaries = []

@@ -17,6 +17,7 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 
 from mqa_rl.demo.backend import DemoBackend, DemoConfig
+from mqa_rl.modules.systems import systems_by_id
 
 
 @hydra.main(config_path="conf", config_name="demo", version_base="1.3")
@@ -30,7 +31,7 @@ def main(cfg: DictConfig) -> None:
     backend = DemoBackend(DemoConfig(dataset=cfg.dataset, reward=OmegaConf.to_container(cfg.reward, resolve=True),
                                      runs=cfg.runs, vqa=tuple(cfg.vqa), max_pushes=cfg.max_pushes,
                                      sessions=cfg.sessions, cache_dir=cfg.cache_dir, beta_steps=cfg.beta_steps,
-                                     policy=cfg.policy))
+                                     policy=cfg.policy, systems=systems_by_id(cfg.systems, cfg.offered)))
     print(f"ready in {backend.startup_s:.1f} s\n{backend.status()}", flush=True)
     try:
         launch(backend, host=cfg.host, port=cfg.port)

@@ -42,7 +42,8 @@ from mqa_rl.data.questions import QUESTION_TYPES
 from mqa_rl.evaluation import answering as ans
 from mqa_rl.evaluation import answering_report as report
 from mqa_rl.files import write_atomic
-from mqa_rl.modules.frozen_policies import resolve_checkpoint, system_spec
+from mqa_rl.modules.frozen_policies import resolve_checkpoint
+from mqa_rl.modules.systems import system_spec, table3_systems
 from mqa_rl.modules.vqa import CHECKPOINT_NAME, answer_size_for, load_vqa
 from mqa_rl.modules.vqa_ensemble import VQAEnsemble
 from mqa_rl.training.run_logger import RunLogger
@@ -81,7 +82,7 @@ def policy_command(name: str, run: str) -> str:
 
 def evaluate_system(cfg: DictConfig, ds: MQADataset, name: str, plan_sha: str) -> tuple[dict, TensorDict | None, torch.Tensor | None]:
     """(result, test records, right [N]) of one system; records and right are None when it is missing."""
-    spec = system_spec(OmegaConf.to_container(cfg.systems, resolve=True), name)
+    spec = system_spec(cfg.systems, name)
     q, v = cfg.questions.name, cfg.vqa.name
     try:
         spec = resolve_checkpoint(spec)
@@ -226,10 +227,9 @@ def report_markdown(cfg: DictConfig, head: str, t3: str, paired: str, reading: l
 def evaluate(cfg: DictConfig) -> dict:
     stored = read_stored(cfg.stored_results)       # before minutes of collecting
     ds = MQADataset(cfg.dataset)
-    names = list(cfg.report) if cfg.report else list(cfg.systems)
-    unknown = [n for n in names if n not in cfg.systems]
-    if unknown:                                  # before minutes of collecting the others
-        raise ValueError(f"report names unknown system(s) {unknown}; known: {list(cfg.systems)}")
+    names = list(cfg.report) if cfg.report else table3_systems(cfg.systems)
+    for name in names:                           # before minutes of collecting the others
+        system_spec(cfg.systems, name)
     results: dict = {"questions": cfg.questions.name, "vqa": cfg.vqa.name, "systems": {}, "references": {}}
     plan = plan_questions(ds, "test", list(cfg.questions.types), None, cfg.questions.max_per_group["test"],
                           int(cfg.collection.seed))

@@ -4,6 +4,7 @@
     python recipes/evaluate_policy.py run=... policies=[greedy] episodes_per_level=3 video_episodes=3
     python recipes/evaluate_policy.py run=... pusher=arm      # the same policy pushing with the Panda arm
     python recipes/evaluate_policy.py run=... 'policies=[greedy,random,image_teacher]'   # + its teacher
+    python recipes/evaluate_policy.py system=dqn_countable_budget_kept     # a dqn system of recipes/conf/systems.yaml
     python recipes/evaluate_policy.py run=... split=train stop_margin=0.5   # choose a stop margin on training scenes
     python recipes/evaluate_policy.py run=... stop_critic=runs/stop/x    # stop learnt by recipes/fit_stop.py
     python recipes/evaluate_policy.py run=... snapshots=true dataset=data/mqa_val   # the learning curve, every snapshot
@@ -41,9 +42,10 @@ from mqa_rl.envs.video import write_video
 from mqa_rl.evaluation.episode_metrics import mean_ci95, scene_bootstrap_ci95
 from mqa_rl.evaluation.learning_curve import plot_learning_curves, run_snapshots
 from mqa_rl.evaluation.unit_reuse import content_digest, episodes_meta, greedy_identity, reuse_episodes
-from mqa_rl.evaluation.policy_units import POLICIES, close_envs, run_units
+from mqa_rl.evaluation.policy_units import REFERENCE_KINDS, close_envs, run_units
 from mqa_rl.files import write_atomic
 from mqa_rl.modules.kept_frame import reading_env_options
+from mqa_rl.modules.systems import system_spec, systems_by_id
 from mqa_rl.modules.trained_policy import newest_run_checkpoint, read_run_config
 from mqa_rl.training.run_dir import RunLock
 from mqa_rl.training.run_logger import RunLogger
@@ -74,9 +76,26 @@ def statistics(values: torch.Tensor, scenes: torch.Tensor | None) -> dict:
     return out
 
 
+GREEDY_OPTIONS = ("run", "checkpoint", "stop_margin", "stop_critic", "kept_frame", "push_memory")
+
+
+def as_greedy(cfg: DictConfig) -> DictConfig:
+    """``cfg`` with ``system=<a dqn system id>`` turned into the greedy policy's options, as the registry defines
+    that system (its run, checkpoint, stop, kept frame, push memory); refused beside any of those options."""
+    if not cfg.get("system"):
+        return cfg
+    spec = system_spec(cfg.systems, cfg.system, kinds=("dqn",))
+    given = [k for k in GREEDY_OPTIONS if cfg.get(k) is not None]
+    if given:
+        raise ValueError(f"system={cfg.system} defines the greedy policy's {', '.join(given)}: give system= or those, "
+                         f"not both")
+    return OmegaConf.merge(cfg, {"system": None, **{k: spec.get(k) for k in GREEDY_OPTIONS}})
+
+
 def evaluate(cfg: DictConfig) -> dict:
     """Every policy of ``cfg.policies`` on the same questions per level; writes and returns the results. One writer
     per ``out_dir`` (a second evaluation into it is refused at once)."""
+    cfg = as_greedy(cfg)
     with RunLock(Path(cfg.out_dir), "evaluate_policy.py"):
         return _evaluate(cfg)
 
@@ -94,9 +113,7 @@ def _evaluate(cfg: DictConfig) -> dict:
         except (TypeError, ValueError):
             raise ValueError(f"stop_margin={cfg.stop_margin!r} must be a number (e.g. 0.5), inf (never stop) or null "
                              f"(plain greedy)") from None
-    unknown = [p for p in cfg.policies if p not in POLICIES]
-    if unknown:
-        raise ValueError(f"unknown policy {unknown[0]!r}; choose among {', '.join(POLICIES)}")
+    references = systems_by_id(cfg.systems, [p for p in cfg.policies if p != "greedy"], REFERENCE_KINDS)
     run_cfg = read_run_config(cfg.run) if cfg.run else None
     dataset = cfg.dataset or (run_cfg.dataset if run_cfg else None)
     if dataset is None:
@@ -110,7 +127,7 @@ def _evaluate(cfg: DictConfig) -> dict:
              "pusher": cfg.pusher, "push_memory": push_memory, "seed": int(cfg.seed), "episodes": int(cfg.episodes_per_level),
              "threshold": float(reward.get("simple_threshold", 0.2)), "run": str(cfg.run) if cfg.run else None,
              "checkpoint": cfg.checkpoint, "stop_margin": cfg.stop_margin, "stop_critic": cfg.stop_critic,
-             "video_episodes": int(cfg.video_episodes),
+             "video_episodes": int(cfg.video_episodes), "systems": references,
              "kept_frame": cfg.kept_frame,
              # a stop or a kept frame reading the counting perception: its frames in every observation (every policy's env alike)
              "frames": reading_env_options({"stop_critic": cfg.stop_critic, "kept_frame": cfg.kept_frame},
@@ -177,6 +194,7 @@ def evaluate_snapshots(cfg: DictConfig) -> list[tuple[int, dict]]:
     ``checkpoint.snapshot_interval_frames``) against the other policies on the same questions, each in
     ``<out_dir>/frames-<N>``; the other policies' episodes run once and are reused. Writes ``curve.json`` and
     ``curve.png`` (greedy − each other policy, per level, 95 % by scene) to ``out_dir``."""
+    cfg = as_greedy(cfg)
     if not cfg.run or cfg.checkpoint:
         raise ValueError("snapshots=true evaluates every snapshot of run=<a train_dqn.py run>: give run=, leave checkpoint=null")
     snapshots = run_snapshots(cfg.run)

@@ -38,6 +38,7 @@ from mqa_rl.data.dataset import LEVELS
 from mqa_rl.files import write_atomic
 from mqa_rl.losses.vqa import VQALoss
 from mqa_rl.modules.vqa import CHECKPOINT_NAME, grounding_module, save_vqa, vqa_module
+from mqa_rl.modules.systems import system_spec
 from mqa_rl.training.model_checkpoint import ModelCheckpoint
 from mqa_rl.training.resume_guard import RESUMABLE, refuse_changed_config
 from mqa_rl.training.run_dir import RunLock, positive_ints, refuse_unresumable
@@ -53,6 +54,7 @@ SELECT = {"accuracy": lambda m: m["val/accuracy"], "loss": lambda m: -m["val/los
 
 
 def check_config(cfg: DictConfig) -> None:
+    system_spec(cfg.systems, cfg.system)             # a known system id (recipes/conf/systems.yaml)
     t = cfg.train
     positive_ints(cfg, "train.steps", "train.batch_size", "train.eval_interval", "checkpoint.interval_steps",
                   "checkpoint.keep_last")
@@ -136,7 +138,10 @@ def _train(cfg: DictConfig, out: Path) -> dict:
     refuse_unresumable(out, ckpt.latest() is not None, bool(cfg.resume))
     if ckpt.latest() is not None:
         refuse_changed_config(out / "config.yaml", config, allow=bool(cfg.resume_allow_changes),
-                              free=(*RESUMABLE, "train.steps", "train.patience_steps"))   # when to stop, not how to train
+                              # when to stop, not how to train; the registry's other systems and how rollouts are
+                              # collected (the store it reads is checked by its system and split)
+                              free=(*RESUMABLE, "train.steps", "train.patience_steps", "systems.", "collection.",
+                                    "vqa.answer_size"))
         state.pop("select")                            # runs older than train.select kept by accuracy
         path = ckpt.load()
         for group in optim.param_groups:               # a deliberate new phase trains under its own settings

@@ -67,6 +67,13 @@ def assert_bit_identical_replays():
 
 
 # ----------------------------------------------------------------------------------------- answering
+def system_registry() -> dict:
+    """The MQA systems of recipes/conf/systems.yaml (id -> entry), the registry every recipe composes."""
+    from omegaconf import OmegaConf
+
+    return OmegaConf.to_container(OmegaConf.load(REPO / "recipes" / "conf" / "systems.yaml"))["systems"]
+
+
 def compose_recipe_config(name: str, overrides: list[str]):
     """A recipe's hydra config (recipes/conf/<name>.yaml) with overrides, as its command line would give."""
     from hydra import compose, initialize_config_dir

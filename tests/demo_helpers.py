@@ -57,11 +57,21 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
+def offered_systems() -> dict:
+    """The systems recipes/demo.py offers by default (demo.yaml's ``offered``, from recipes/conf/systems.yaml)."""
+    from mqa_rl.modules.systems import systems_by_id
+
+    conf = ROOT / "recipes" / "conf"
+    return systems_by_id(OmegaConf.load(conf / "systems.yaml").systems, OmegaConf.load(conf / "demo.yaml").offered)
+
+
 def start_demo(dataset_dir: Path, runs: Path | None, cache_dir: Path, **cfg):
-    """(backend, blocks, url): the demo served on 127.0.0.1 by this process (close with ``stop_demo``)."""
+    """(backend, blocks, url): the demo served on 127.0.0.1 by this process (close with ``stop_demo``), offering
+    the systems recipes/demo.py offers."""
     from mqa_rl.demo.app import launch
     from mqa_rl.demo.backend import DemoBackend, DemoConfig
 
+    cfg.setdefault("systems", offered_systems())
     backend = DemoBackend(DemoConfig(dataset=dataset_dir, reward=REWARD, runs=runs, cache_dir=cache_dir, **cfg))
     port = free_port()
     demo = launch(backend, host="127.0.0.1", port=port, block=False, quiet=True)

@@ -13,7 +13,7 @@ set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 . tools/bootstrap.sh
 . tools/steps.sh
-SYSTEMS=no_manipulation,random,dqn_countable_budget_kept,privileged
+SYSTEMS=no_manipulation,random,dqn_countable_budget_kept,privileged     # ids of recipes/conf/systems.yaml
 QUESTIONS=40
 
 step "1/3 the dataset"
@@ -23,7 +23,6 @@ python recipes/evaluate.py answering=shipped vqa=counting vqa_dir=checkpoints/vq
   "questions.max_per_group.test=$QUESTIONS" stored_results=checkpoints/vqa_counting/test_split_results.json \
   videos_dir=runs/main/videos fig7=false out_dir=runs/main/report
 step "3/3 videos of the best system's episodes"
-python recipes/evaluate_policy.py run=checkpoints/dqn_countable stop_margin=inf \
-  kept_frame=checkpoints/vqa_counting/perception.pt episodes_per_level=1 'policies=[greedy]' video_episodes=1 \
-  out_dir=runs/main/videos
+python recipes/evaluate_policy.py system=dqn_countable_budget_kept episodes_per_level=1 'policies=[greedy]' \
+  video_episodes=1 out_dir=runs/main/videos
 step "done: open runs/main/report/report.md (Table III, paired differences, figure); videos in runs/main/videos"

@@ -18,7 +18,7 @@
 # Each variant starts from the student's checkpoint as a new phase (train_dqn.py init_from=: weights, optimiser,
 # the 8 imitation frames in its replay buffer, counters). Running the same command again skips finished steps and
 # resumes an interrupted one. Use in the answering recipes as systems dqfd_global / dqfd_local / dqfd_global_local
-# (recipes/conf/answering/default.yaml), or any OUT_ROOT with systems.dqfd_<variant>.run=... overrides.
+# (recipes/conf/systems.yaml), or any OUT_ROOT with systems.dqfd_<variant>.run=... overrides.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 STUDENT=${1:?usage: bash tools/train_reward_variants.sh STUDENT_ROOT [OUT_ROOT] [FRAMES] [overrides ...]}

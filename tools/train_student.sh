@@ -25,19 +25,23 @@
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 TEACHER=${MQA_TEACHER:-image}
-ORACLE=(oracle.min_visible_fraction=0.3 oracle.require_gain=false oracle.geometry=visible oracle.order=visible_first)
 REWARD=global
 export MQA_STOP_VALUE=chi
-case "$TEACHER" in
-  image) REFINE=0 ;;        # the push the image and the segmentation say, no previews
-  refined) REFINE=1 ;;      # the image teacher's push, the best of 9 simulated starts
-  countable) REFINE=1; REWARD=countable; MQA_STOP_VALUE=uncountable
-    ORACLE=(oracle.min_visible_fraction=0.0 oracle.require_gain=true oracle.geometry=full oracle.order=least_visible) ;;
+case "$TEACHER" in         # the teacher is the system <TEACHER>_teacher of recipes/conf/systems.yaml
+  image|refined) ;;        # the push the image and the segmentation say / the best of 9 simulated starts
+  countable) REWARD=countable; MQA_STOP_VALUE=uncountable ;;
   *) echo "MQA_TEACHER must be 'image', 'refined' or 'countable', got '${TEACHER}'" >&2; exit 2 ;;
 esac
-# the teacher a demonstration set was collected with, as demos.json records it
-WANT="$REFINE $(printf '%s\n' "${ORACLE[@]}" | cut -d= -f2 | tr '\n' ' ' | sed 's/ $//')"
 . tools/bootstrap.sh
+# the teacher's options a demonstration set of it records in demos.json (refine_radius, min_visible_fraction,
+# require_gain, geometry, order), from the registry
+WANT=$(python -c "
+import sys; from omegaconf import OmegaConf
+from mqa_rl.modules.frozen_policies import privileged_options
+from mqa_rl.modules.systems import system_spec
+o = privileged_options(system_spec(OmegaConf.load('recipes/conf/systems.yaml').systems, sys.argv[1]))
+print(o['refine_radius'], float(o['min_visible_fraction']), str(o['require_gain']).lower(), o['geometry'], o['order'])" \
+  "${TEACHER}_teacher")
 ROOT=${1:-runs/student}
 SEED=${2:-0}
 shift $(( $# < 2 ? $# : 2 ))
@@ -66,7 +70,7 @@ pids=()
 for k in 0 1; do
   if [ ! -f "$ROOT/demos_$k/demos.json" ]; then
     python recipes/collect_demonstrations.py "states=${MQA_DEMO_STATES:-600}" "seed=$(( 2 * SEED + k + 100 ))" \
-      "oracle.refine_radius=$REFINE" "${ORACLE[@]}" progress=false \
+      "teacher=${TEACHER}_teacher" progress=false \
       "out_dir=$ROOT/demos_$k" &
     pids+=($!)
   fi

@@ -56,6 +56,8 @@ class DemoConfig:
     videos_per_session: int = 3              # episode videos kept per browser session
     policy: str | None = None                # the page's default policy: the first whose name holds this text
                                              # (None, or no match: the first trained one)
+    systems: Mapping = field(default_factory=dict)   # systems of the registry offered by id (id -> spec: random,
+                                                     # random_masked, none; recipes/conf/systems.yaml)
 
 
 @dataclass
@@ -88,7 +90,7 @@ class DemoBackend:
         self.table_columns = list(table_row(0, td, None))
         self.camera = env.base_env.camera
         self.catalog = SceneCatalog(self.dataset, self.camera, cfg.cache_dir)
-        self.policies = PolicyRegistry(cfg.runs, env, cfg.max_pushes)
+        self.policies = PolicyRegistry(cfg.runs, env, cfg.max_pushes, cfg.systems)
         chosen = [n for n in self.policies.names if cfg.policy and cfg.policy in n]
         self.default_policy = (chosen or self.policies.trained or self.policies.names)[0]
         self.files = SessionFiles(tempfile.mkdtemp(prefix="mqa_demo_"))

@@ -1,4 +1,5 @@
-"""The policies a visitor can pick: the paper's random baseline, and every trained Q-network found.
+"""The policies a visitor can pick: the systems of the registry offered by id (``recipes/conf/systems.yaml``: the
+paper's random baseline, random inside the action mask, no manipulation), and every trained Q-network found.
 
 Trained policies are ``recipes/train_dqn.py`` run folders (``config.yaml`` + ``checkpoints/``) in a
 configured folder (the folder itself, its subfolders and theirs). Each checkpoint is loaded once,
@@ -13,6 +14,7 @@ file — is listed with the reason instead of stopping the server.
 from __future__ import annotations
 
 import logging
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,11 +24,13 @@ from omegaconf import OmegaConf
 from mqa_rl import keys
 from mqa_rl.modules.learned_stop import LearnedStop, StopCritic, policy_fingerprint, policy_net
 from mqa_rl.modules.random_policy import RandomMQAPolicy
+from mqa_rl.modules.stop_policy import StopPolicy
 from mqa_rl.modules.trained_policy import load_greedy, run_checkpoints
 
 log = logging.getLogger(__name__)
-RANDOM = "random (paper's baseline)"
-RANDOM_MASKED = "random inside the action mask"
+# the registry's systems the demo plays by id: those that need neither a run (found in the runs folder instead)
+# nor the simulator's hidden state
+OFFERED_KINDS = ("random", "random_masked", "none")
 WEIGHT_SUFFIXES = (".pt", ".pth", ".ckpt", ".safetensors", ".bin")
 TRAIN_HINT = "train one with `python recipes/train_dqn.py out_dir=<runs folder>/<name>`"
 DQN_RUN_KEYS = {"reward", "env", "model"}       # what a train_dqn.py config.yaml has
@@ -45,13 +49,14 @@ def is_mqa_model_file(path: Path) -> bool:
 @dataclass
 class PolicyEntry:
     name: str
-    actor: object | None = None        # a greedy QValueActor; None for the random baselines
+    actor: object | None = None        # a greedy QValueActor (or the stop at once); None for the random baselines
     masked: bool = False               # random baseline drawing inside the action mask
     max_pushes: int | None = None      # the run's env.max_pushes (a learned stop's pushes feature is scaled by it)
+    trained: bool = True               # a Q-network found in the runs folder (not a system of the registry)
 
     @property
     def is_q_network(self) -> bool:
-        return self.actor is not None
+        return self.actor is not None and self.trained
 
 
 def _observed_frame_size(env) -> int:
@@ -63,10 +68,11 @@ def _observed_frame_size(env) -> int:
 class PolicyRegistry:
     """Usable policies by display name, and the unusable candidates with their reasons."""
 
-    def __init__(self, runs_dir: str | Path | None, env, max_pushes: int):
+    def __init__(self, runs_dir: str | Path | None, env, max_pushes: int, systems: Mapping[str, Mapping] | None = None):
+        """``systems``: the registry's systems to offer by id (id -> spec, of the kinds in ``OFFERED_KINDS``)."""
         self.runs_dir = Path(runs_dir) if runs_dir else None
         self.max_pushes = max_pushes
-        self.entries: dict[str, PolicyEntry] = {RANDOM: PolicyEntry(RANDOM), RANDOM_MASKED: PolicyEntry(RANDOM_MASKED, masked=True)}
+        self.entries: dict[str, PolicyEntry] = {name: self._system(name, spec) for name, spec in (systems or {}).items()}
         self.problems: list[tuple[str, str]] = []         # (what, why it cannot be used)
         self.passed_over: list[tuple[str, str]] = []      # (what, why this demo does not offer it): usable elsewhere
         self._frames = _observed_frame_size(env)
@@ -84,6 +90,16 @@ class PolicyRegistry:
                 self.problems.append((str(stray), "a bare weights file, not a recipes/train_dqn.py run folder "
                                                   "(config.yaml + checkpoints/checkpoint-*/): the demo cannot "
                                                   "rebuild its network"))
+
+    @staticmethod
+    def _system(name: str, spec: Mapping) -> PolicyEntry:
+        kind = spec.get("kind")
+        if kind not in OFFERED_KINDS:
+            raise ValueError(f"the demo plays systems of kind {', '.join(OFFERED_KINDS)}; {name!r} is {kind!r} "
+                             f"(a dqn system's run is offered from the runs folder: runs=<the folder holding it>)")
+        if kind == "none":
+            return PolicyEntry(name, actor=StopPolicy(), trained=False)
+        return PolicyEntry(name, masked=kind == "random_masked", trained=False)
 
     # ------------------------------------------------------------------------------ discovery
     def _run_folders(self) -> list[Path]:
@@ -198,7 +214,7 @@ class PolicyRegistry:
     def make(self, name: str, seed: int):
         """The policy module for one episode (a fresh seeded random policy, or the shared actor)."""
         entry = self.get(name)
-        if entry.is_q_network:
+        if entry.actor is not None:
             return entry.actor
         return RandomMQAPolicy(self.max_pushes, seed=seed, masked=entry.masked)
 

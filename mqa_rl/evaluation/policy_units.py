@@ -1,4 +1,5 @@
-"""A policy's evaluation episodes on one level (a *unit*), run here or on Ray actors (``recipes/evaluate_policy.py``).
+"""A policy's evaluation episodes on one level (a *unit*), run here or on Ray actors (``recipes/evaluate_policy.py``):
+greedy (the run under evaluation) or a system of the registry that needs no run (``setup["systems"]``: id -> spec).
 
 A unit seeds its env before its episodes, so it gives the same episodes whichever process runs it and after
 whichever other unit: the local and the Ray backends report the same figures. Each process keeps one env
@@ -22,21 +23,8 @@ from mqa_rl.modules.stop_margin import StopMargin
 from mqa_rl.modules.trained_policy import load_greedy
 from mqa_rl.transforms.mqa_env import make_mqa_env
 
-# References that read the simulator (never a learned policy), as frozen-policy specs: the least-visible-first
-# oracle, the image teacher (its occluders and directions from visible pixels and depth alone; the students'
-# teacher), and the image teacher whose push is refined by simulating its direction from the 8 neighbouring
-# start cells (the shipped student's); and the oracle and the image teacher serving each target only until it shows
-# the perfect counter's 20 px (what the answer needs: docs/policy.md, "Where, or which").
-ORACLES = {"oracle": {"kind": "privileged", "lookahead": 1},
-           "countable_oracle": {"kind": "privileged", "lookahead": 1, "min_visible_fraction": 0.0},
-           "countable_image_teacher": {"kind": "privileged", "lookahead": 1, "order": "visible_first", "geometry": "visible",
-                                       "min_visible_fraction": 0.0},
-           "image_teacher": {"kind": "privileged", "lookahead": 1, "order": "visible_first", "geometry": "visible"},
-           "refined_teacher": {"kind": "privileged", "lookahead": 1, "order": "visible_first", "geometry": "visible",
-                               "refine_radius": 1}}
-# the reference that never pushes: the first image is the last (what a policy's pushes are worth beside nothing)
-NO_MANIPULATION = {"kind": "none"}
-POLICIES = ("greedy", "random", "random_masked", "no_manipulation", *ORACLES)
+# The policies a unit runs beside greedy: the registry's systems that need no run (their specs travel in the setup).
+REFERENCE_KINDS = ("random", "random_masked", "none", "privileged")
 
 _ENVS: dict = {}            # this process's env per level: a unit reuses it (local: one process; ray: per actor)
 
@@ -72,12 +60,14 @@ def evaluate_unit(setup: dict, level: str, name: str) -> tuple[dict, list]:
         def on_episode(i, rollout):
             if i < setup["video_episodes"]:
                 videos.append(qmap_episode_frames(rollout, env.base_env.camera, env.base_env.question.text))
-    elif name in ("random", "random_masked"):
-        policy = RandomMQAPolicy(max_pushes, seed=setup["seed"], masked=name == "random_masked")
-    elif name in ORACLES or name == "no_manipulation":
-        policy, _ = make_frozen_policy(ORACLES.get(name, NO_MANIPULATION), env.base_env, max_pushes)
+    elif name in setup["systems"]:
+        spec = setup["systems"][name]
+        if spec["kind"] in ("random", "random_masked"):        # seeded per unit: the same draws on either backend
+            policy = RandomMQAPolicy(max_pushes, seed=setup["seed"], masked=spec["kind"] == "random_masked")
+        else:
+            policy, _ = make_frozen_policy(spec, env.base_env, max_pushes)
     else:
-        raise ValueError(f"unknown policy {name!r}; choose among {', '.join(POLICIES)}")
+        raise ValueError(f"unknown policy {name!r}; choose among greedy, {', '.join(setup['systems'])}")
     keeper = FrameKeeper.from_file(setup["kept_frame"], env.base_env.dataset, policy) if setup.get("kept_frame") else None
     metrics = run_episodes(env, policy, setup["episodes"], max_pushes=max_pushes, simple_threshold=setup["threshold"],
                            on_episode=on_episode, keeper=keeper)

@@ -11,7 +11,8 @@ mapping), frozen: nothing here learns.
                                             push_memory: r (default the run's env.push_memory; < 0: none) runs it
                                             in an env with PushMemory(r), as it was trained (``make_mqa_env(push_memory=r)``)
     {kind: privileged, lookahead: 1}        the oracle reference (reads the simulator; see privileged_policy;
-                                            order: visible_first, geometry: visible = the image teacher)
+                                            order: visible_first, geometry: visible = the image teacher;
+                                            refine_radius, require_gain: the refined and countable teachers)
     any kind, kept_frame: <perception.pt>   I_stop is the frame of the episode where that counting perception reads
                                             the most of the asked class, not the last (``kept_frame.FrameKeeper``;
                                             the rollout collector applies it)
@@ -22,10 +23,12 @@ whether every rollout of a question is the same (the env replays bit-identically
 collection needs one rollout per question. ``resolve_checkpoint(spec)`` pins a dqn spec to the run's
 newest checkpoint. The policies themselves live in their own modules (``stop_policy``, ``stop_margin``,
 ``learned_stop``, ``trained_policy``, ``random_policy``, ``privileged_policy``); this file only maps specs to them.
+The systems, each a spec under an id, are in one registry (``recipes/conf/systems.yaml``, read through ``systems``).
 """
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -43,7 +46,7 @@ from mqa_rl.transforms.push_memory import memory_radius
 
 KINDS = ("random", "random_masked", "none", "dqn", "privileged")
 PRIVILEGED_OPTIONS = ("min_visible_px", "min_visible_fraction", "max_tries_per_occluder", "lookahead", "order",
-                      "geometry", "refine_radius")
+                      "geometry", "refine_radius", "require_gain")
 
 
 def check_spec(spec: Mapping) -> dict:
@@ -70,6 +73,14 @@ def check_spec(spec: Mapping) -> dict:
     if unknown:
         raise ValueError(f"unknown policy option(s) {sorted(unknown)} for kind {kind!r}")
     return spec
+
+
+def privileged_options(spec: Mapping) -> dict:
+    """Every option of the privileged policy ``spec`` builds: the spec's, else ``PrivilegedPushPolicy``'s default (what
+    a demonstration set records of its teacher, so that two teachers compare whatever their specs leave out)."""
+    defaults = {k: p.default for k, p in inspect.signature(PrivilegedPushPolicy).parameters.items()
+                if k in PRIVILEGED_OPTIONS}
+    return {**defaults, **{k: spec[k] for k in PRIVILEGED_OPTIONS if k in spec}}
 
 
 def resolve_checkpoint(spec: Mapping) -> dict:
@@ -124,9 +135,3 @@ def make_frozen_policy(spec: Mapping, env, max_pushes: int):
                              masked=bool(run_cfg.action_mask))
     return explorer, ExplorationType.RANDOM
 
-
-def system_spec(systems: Mapping, name: str) -> dict:
-    """The policy spec of system ``name`` in a ``systems`` mapping (recipes/conf/answering/default.yaml)."""
-    if name not in systems:
-        raise ValueError(f"unknown system {name!r}; the config defines {sorted(systems)} (add one under systems:)")
-    return check_spec(systems[name])

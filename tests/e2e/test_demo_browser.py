@@ -85,16 +85,16 @@ class SlowPusher:
 
 @pytest.mark.timeout(300)
 def test_closing_the_page_mid_episode_frees_its_env(served, monkeypatch):
-    from mqa_rl.demo.policies import RANDOM_MASKED, PolicyEntry
+    from mqa_rl.demo.policies import PolicyEntry
 
     backend, url = served
     slow = SlowPusher()
-    monkeypatch.setitem(backend.policies.entries, RANDOM_MASKED, PolicyEntry(RANDOM_MASKED, actor=slow))
+    monkeypatch.setitem(backend.policies.entries, "random_masked", PolicyEntry("random_masked", actor=slow))
     driver = open_browser()
     try:
         page = DemoPage(driver, url)
         page.open()
-        page.pick_policy(RANDOM_MASKED)
+        page.pick_policy("random_masked")
         driver.find_element("id", "run").click()
         page._present("#live-frame img")                          # the episode is under way
         assert backend.pool.borrowers

@@ -25,7 +25,7 @@ from mqa_rl.data.questions import QUESTION_TYPES
 from mqa_rl.envs import actions
 from conftest import REPO
 
-RANDOM = "random (paper's baseline)"
+RANDOM, RANDOM_MASKED = "random", "random_masked"        # system ids (recipes/conf/systems.yaml)
 
 
 @pytest.fixture(scope="module")
@@ -180,7 +180,7 @@ class SlowPusher:
 
 
 def test_cancelled_episode_gives_its_env_back(served, monkeypatch):
-    from mqa_rl.demo.policies import RANDOM_MASKED, PolicyEntry
+    from mqa_rl.demo.policies import PolicyEntry
 
     backend, url = served
     monkeypatch.setitem(backend.policies.entries, RANDOM_MASKED, PolicyEntry(RANDOM_MASKED, actor=SlowPusher()))

@@ -179,20 +179,23 @@ def test_the_image_teacher_only_serves_targets_the_image_shows(small_dataset):
     assert served > 0
 
 
-@pytest.mark.parametrize("reference,base", [("countable_oracle", "oracle"), ("countable_image_teacher", "image_teacher")])
+@pytest.mark.parametrize("reference,base", [("privileged_countable", "privileged"),
+                                            ("countable_image_teacher", "image_teacher")])
 def test_the_countable_references_serve_only_targets_below_the_counters_line(small_dataset, reference, base):
-    """evaluate_policy's ``countable_oracle`` (the ``privileged_countable`` system) and ``countable_image_teacher``
-    serve a target until it shows the perfect counter's 20 px, whatever share of its silhouette that is: a subset
-    of what the oracle (the image teacher) serves."""
-    from mqa_rl.evaluation.policy_units import ORACLES
-    from mqa_rl.modules.frozen_policies import make_frozen_policy
+    """The systems ``privileged_countable`` and ``countable_image_teacher`` serve a target until it shows the perfect
+    counter's 20 px, whatever share of its silhouette that is: a subset of what the oracle (the image teacher) serves."""
+    from conftest import system_registry
 
+    from mqa_rl.modules.frozen_policies import make_frozen_policy
+    from mqa_rl.modules.systems import system_spec
+
+    systems = system_registry()
     served = 0
     for env, gt in _hard_scene_truths(small_dataset):
-        countable, _ = make_frozen_policy(ORACLES[reference], env, 10)
+        countable, _ = make_frozen_policy(system_spec(systems, reference), env, 10)
         mine = {t for _, (t, _) in countable.candidates(gt)}
         assert all(gt["target"][t] and gt["visible"][t] < countable.min_visible_px for t in mine)
-        assert mine <= {t for _, (t, _) in make_frozen_policy(ORACLES[base], env, 10)[0].candidates(gt)}
+        assert mine <= {t for _, (t, _) in make_frozen_policy(system_spec(systems, base), env, 10)[0].candidates(gt)}
         served += len(mine)
         if not mine:
             assert countable.choose() == actions.STOP

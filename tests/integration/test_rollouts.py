@@ -15,7 +15,8 @@ from mqa_rl.collectors.rollouts import collect_rollouts, plan_questions
 from mqa_rl.collectors.store import EpisodeStore, StoreError, load_records
 from mqa_rl.data.dataset import LEVELS
 from mqa_rl.modules.frozen_policies import resolve_checkpoint
-from conftest import REPO
+from mqa_rl.modules.systems import system_spec
+from conftest import REPO, system_registry
 
 PLAN = dict(policy={"kind": "random"}, split="train", question_types=["counting"], max_per_group=1, repeats=2,
             max_pushes=2, workers=1, chunk_episodes=2, progress=False)
@@ -329,7 +330,7 @@ def test_evaluate_policy_reports_the_counter_on_the_frame_kept(small_dataset_dir
     setup = {"dataset": str(small_dataset_dir), "split": "train", "qtypes": ["counting"], "max_pushes": 3,
              "pusher": "finger", "push_memory": None, "seed": 3, "episodes": 4, "threshold": 0.2, "frames": {},
              "reward": OmegaConf.to_container(OmegaConf.load(REPO / "recipes" / "conf" / "reward" / "countable.yaml")),
-             "kept_frame": str(path)}
+             "kept_frame": str(path), "systems": {"random_masked": system_spec(system_registry(), "random_masked")}}
     try:
         for kept, same_as in ((0, "counter_start"), (-1, "counter_stop")):
             monkeypatch.setattr(FrameKeeper, "choose", lambda self, states, k=kept: range(len(states))[k])
