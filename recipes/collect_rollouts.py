@@ -9,7 +9,8 @@
 
 Writes ``${root}/rollouts/<questions>/<system>/<split>`` (an ``EpisodeStore``: memmap chunks written
 atomically). Interrupted? Run the same command again: it collects only what is missing. Systems are
-defined in recipes/conf/systems.yaml; ``mqa_rl.collectors.rollouts`` says what is stored.
+defined in recipes/conf/systems.yaml; ``mqa_rl.collectors.rollouts`` says what is stored. The answer camera
+follows the VQA the rollouts are for (``vqa=counting``, the default: 448 px; ``vqa=eqa``: none).
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ def collect(cfg: DictConfig) -> list[dict]:
     for split in cfg.splits:
         summary = collect_split(Path(cfg.out_dir) / split, split, dataset=cfg.dataset, policy=spec,
                                 questions=OmegaConf.to_container(cfg.questions),
-                                collection=OmegaConf.to_container(cfg.collection), overwrite=cfg.overwrite,
+                                collection=OmegaConf.to_container(cfg.collection, resolve=True), overwrite=cfg.overwrite,
                                 progress=cfg.progress, ray_address=cfg.ray.address)
         print(f"{cfg.system} {split}: {summary}", flush=True)
         summaries.append(summary)

@@ -1,8 +1,8 @@
 """Table III as measured: each MQA system (its frozen policy's test rollouts answered by the VQA trained
 on its training rollouts), COUNTING accuracy per level beside the paper's, with 95 % intervals.
 
-    python recipes/evaluate.py                                  # questions=counting vqa=eqa
-    python recipes/evaluate.py vqa=counting                     # the VQAs trained with vqa=counting
+    python recipes/evaluate.py                                  # questions=counting vqa=counting
+    python recipes/evaluate.py vqa=eqa                          # the VQAs trained with the paper's (EQA's) model
     python recipes/evaluate.py questions=all_types              # all four question types, per type and level
     python recipes/evaluate.py 'report=[random,no_manipulation]'
 
@@ -90,13 +90,13 @@ def evaluate_system(cfg: DictConfig, ds: MQADataset, name: str, plan_sha: str) -
         return missing(f"no trained policy in {spec['run']}", policy_command(name, spec["run"])), None, None
     store = Path(cfg.rollouts_dir) / name / "test"
     vqa_paths = [Path(d) / name / CHECKPOINT_NAME for d in vqa_dirs(cfg)]
-    train_cmd = (f"python recipes/collect_rollouts.py system={name} questions={q} && "
+    train_cmd = (f"python recipes/collect_rollouts.py system={name} questions={q} vqa={v} && "
                  f"python recipes/train_vqa.py system={name} questions={q} vqa={v}")
     absent = [p for p in vqa_paths if not p.exists()]
     if absent:
         return missing(f"no VQA at {absent[0]}", train_cmd), None, None
     model = load_vqa(vqa_paths[0]) if len(vqa_paths) == 1 else VQAEnsemble.load(vqa_paths)
-    collection = OmegaConf.to_container(cfg.collection)
+    collection = OmegaConf.to_container(cfg.collection, resolve=True)
     answer_size = answer_size_for([model], int(collection["env"]["image_size"]))
     if answer_size is not None:                       # the VQA reads the answer camera's frames
         collection["env"]["answer_size"] = answer_size
@@ -106,7 +106,7 @@ def evaluate_system(cfg: DictConfig, ds: MQADataset, name: str, plan_sha: str) -
     except (FileNotFoundError, StoreError) as error:
         if not cfg.collect_missing:
             return missing(f"no complete test rollouts ({error})", f"python recipes/collect_rollouts.py system={name} "
-                                                                   f"questions={q} 'splits=[test]'"), None, None
+                                                                   f"questions={q} vqa={v} 'splits=[test]'"), None, None
         collect_split(store, "test", dataset=ds, policy=spec, questions=OmegaConf.to_container(cfg.questions),
                       collection=collection, progress=cfg.progress, ray_address=cfg.ray.address)
         records = load_records(store, EVAL_KEYS)

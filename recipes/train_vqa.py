@@ -1,16 +1,16 @@
 """Train the two-frame VQA on one MQA system's training rollouts (the policy is frozen; only the VQA learns).
 
-    python recipes/train_vqa.py system=random                       # EQA's model (vqa=eqa), frozen encoder
-    python recipes/train_vqa.py system=random vqa=counting           # the counting perception under the paper's head
+    python recipes/train_vqa.py system=random                       # the counting perception under the paper's head
+    python recipes/train_vqa.py system=random vqa=eqa                # the paper's model (EQA's CNN), frozen encoder
     python recipes/train_vqa.py system=random resume=true           # continue a killed run
     python recipes/train_vqa.py system=random encoder.freeze=false device=cuda   # fine-tune the encoder
     python recipes/train_vqa.py system=random vqa=counting encoder.freeze=false \
         init_from=checkpoints/vqa_counting/random train.lr=1e-4     # fine-tune a frozen head with its perception
 
-Reads ``${root}/rollouts/<questions>/<system>/train`` (recipes/collect_rollouts.py) and the pretrained
-encoder (recipes/pretrain_vqa_encoder.py); writes to ``out_dir``: ``vqa.pt`` (the model with the best
-accuracy on held-out training scenes: what ``mqa_rl.modules.vqa.load_vqa`` and recipes/evaluate.py
-read), ``checkpoints/`` (atomic, for resume=true), ``csv/`` and ``wandb/`` logs (loss, accuracy,
+Reads ``${root}/rollouts/<questions>/<system>/train`` (recipes/collect_rollouts.py) and the counting perception
+(``perception.weights``) or, with vqa=eqa, the pretrained encoder (recipes/pretrain_vqa_encoder.py); writes to
+``out_dir``: ``vqa.pt`` (the model with the best accuracy on held-out training scenes: what
+``mqa_rl.modules.vqa.load_vqa`` and recipes/evaluate.py read), ``checkpoints/`` (atomic, for resume=true), ``csv/`` and ``wandb/`` logs (loss, accuracy,
 validation accuracy per level), ``config.yaml`` and ``summary.json``.
 """
 

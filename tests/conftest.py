@@ -103,6 +103,7 @@ def answering_root(small_dataset_dir, tmp_path_factory):
                  "questions.max_per_group.test=2", "collection.repeats.train=2", "collection.workers=1",
                  "collection.env.max_pushes=2"]
     collect = load_recipe("collect_rollouts")
-    for system in ("random", "no_manipulation"):
-        collect.collect(compose_recipe_config("collect_rollouts", [*overrides, f"system={system}", "progress=false"]))
+    for system in ("random", "no_manipulation"):        # the env's 224-px frames only (vqa=eqa: no answer camera)
+        collect.collect(compose_recipe_config("collect_rollouts", [*overrides, f"system={system}", "vqa=eqa",
+                                                                   "progress=false"]))
     return root, overrides

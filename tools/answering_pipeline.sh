@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# The whole MQA pipeline at a quick CPU scale (recipes' `answering=quick` profile), after the dataset:
+# The whole MQA pipeline at a quick CPU scale (recipes' `answering=quick` profile) with the paper's VQA (vqa=eqa),
+# after the dataset:
 #   1. train DQN(R_l) briefly (480 frames)                           -> runs/quick/dqn_local
 #   2. roll out random, no manipulation, DQN(R_l), privileged (40 train + 30 test COUNTING questions
 #      per level; random twice per training question)               -> runs/quick/rollouts
@@ -18,19 +19,20 @@ read -r -a DQN <<< "${MQA_DQN:-collector.total_frames=480 collector.annealing_fr
 read -r -a PRETRAIN <<< "${MQA_PRETRAIN:-train.steps=100 train.batch_size=16 train.eval_interval=50 frames.max_frames=600}"
 read -r -a VQA <<< "${MQA_VQA:-train.steps=600 train.eval_interval=100}"
 A=(answering=quick "root=$ROOT" "systems.dqn_local.run=$ROOT/dqn_local" "${EXTRA[@]}")
-SYSTEMS=random,no_manipulation,dqn_local,privileged
+SYSTEMS=random,no_manipulation,dqn_local,privileged     # ids of recipes/conf/systems.yaml
+V=(vqa=eqa)                                             # the answering recipes' VQA (their default: counting)
 . tools/steps.sh
 
 step "1/6 DQN(R_l), briefly"
 python recipes/train_dqn.py reward=local "out_dir=$ROOT/dqn_local" resume=true "${DQN[@]}"
 step "2/6 rollouts of $SYSTEMS"
-python recipes/collect_rollouts.py -m "${A[@]}" "system=$SYSTEMS"
+python recipes/collect_rollouts.py -m "${A[@]}" "${V[@]}" "system=$SYSTEMS"
 step "3/6 VQA encoder pretraining"
 python recipes/pretrain_vqa_encoder.py "${A[@]}" resume=true "${PRETRAIN[@]}"
 step "4/6 a VQA per system"
-python recipes/train_vqa.py -m "${A[@]}" "system=$SYSTEMS" resume=true "${VQA[@]}"
+python recipes/train_vqa.py -m "${A[@]}" "${V[@]}" "system=$SYSTEMS" resume=true "${VQA[@]}"
 step "5/6 Table III"
-python recipes/evaluate.py "${A[@]}" "report=[$SYSTEMS]"
+python recipes/evaluate.py "${A[@]}" "${V[@]}" "report=[$SYSTEMS]"
 step "6/6 videos of DQN(R_l)"
 python recipes/evaluate_policy.py "run=$ROOT/dqn_local" "policies=[greedy]" episodes_per_level=1 video_episodes=1 \
   video_format=mp4 "out_dir=$ROOT/videos"

@@ -22,8 +22,8 @@ if [ ! -f "$EXTRA/manifest.json" ]; then
   python recipes/make_dataset.py dataset.seed=1 "dataset.out_dir=$EXTRA" 'dataset.num_scenes={easy: 300, medium: 300, hard: 400}'
 fi
 step "random rollouts on it -> runs/pretrain_s1"
-python recipes/collect_rollouts.py root=runs/pretrain_s1 "dataset=$EXTRA" system=random \
-  'questions.max_per_group={train: 500, test: 200}' collection.repeats.train=1 progress=false
+python recipes/collect_rollouts.py root=runs/pretrain_s1 "dataset=$EXTRA" system=random vqa=eqa \
+  'questions.max_per_group={train: 500, test: 200}' collection.repeats.train=1 progress=false   # the env's frames only
 step "the encoder -> $OUT"
 python recipes/pretrain_vqa_encoder.py "out_dir=$OUT" encoder.head_width=64 frames.max_frames=7000 resume=true \
   "frames.stores=[$MAIN,runs/pretrain_s1/rollouts/counting/random/train,runs/pretrain_s1/rollouts/counting/random/test]"

@@ -33,9 +33,9 @@ for v in global local global_local; do
     python recipes/train_dqn.py "reward=$v" "out_dir=runs/$v" resume=true
   fi
 done
-step "rollouts of random (the VQA encoder learns from their frames)"
-python recipes/collect_rollouts.py "${EXTRA[@]}" system=random
 VQA=("vqa=${MQA_VQA:-eqa}")
+step "rollouts of random (the VQA encoder learns from their frames)"
+python recipes/collect_rollouts.py "${EXTRA[@]}" system=random "${VQA[@]}"
 ENCODER=checkpoints/vqa_encoder
 [ "${MQA_VQA:-eqa}" = classes ] && ENCODER=checkpoints/vqa_encoder_scenes
 ROOT=runs/answering
@@ -49,7 +49,7 @@ else
 fi
 SYSTEMS=random,no_manipulation,dqn_global,dqn_local,dqn_global_local,privileged,dqn_student
 step "rollouts of $SYSTEMS"
-python recipes/collect_rollouts.py -m "${EXTRA[@]}" "system=$SYSTEMS"     # random's: already complete, skipped
+python recipes/collect_rollouts.py -m "${EXTRA[@]}" "system=$SYSTEMS" "vqa=${MQA_VQA:-eqa}"   # random's: complete, skipped
 step "a VQA per system"
 python recipes/train_vqa.py -m "${EXTRA[@]}" "system=$SYSTEMS" resume=true "${VQA[@]}"
 step "Table III"

@@ -38,7 +38,7 @@ from mqa_rl import keys
 from mqa_rl.data.dataset import LEVELS, MQADataset, dataset_fingerprint
 from mqa_rl.data.questions import QUESTION_TYPES
 from mqa_rl.collectors.ray_pool import RayPool, check_backend, ray_session
-from mqa_rl.collectors.store import EpisodeStore
+from mqa_rl.collectors.store import META, EpisodeStore, read_meta
 from mqa_rl.envs.sapien_bin import SapienBinEnv
 from mqa_rl.modules.frozen_policies import is_deterministic, make_frozen_policy, resolve_checkpoint
 from mqa_rl.modules.kept_frame import FrameKeeper, episode_states, reading_env_options
@@ -212,6 +212,18 @@ class _InProcess:
 
 
 # ----------------------------------------------------------------------------------------- collection
+def _answer_camera_held(out_dir, env_kwargs: dict) -> dict:
+    """``{"answer_size": n}`` when ``out_dir`` holds a collection of the same env with the answer camera's frames too
+    (a counting VQA's rollouts): it serves a VQA that reads the env's frames (vqa=eqa) as it is, so it is resumed so,
+    not refused as another plan; else ``{}``."""
+    if not (Path(out_dir) / META).is_file():
+        return {}
+    held = dict(read_meta(out_dir).get("env") or {})
+    size = held.pop("answer_size", None)
+    held.pop("answer_observation", None)
+    return {"answer_size": size} if size is not None and held == env_kwargs else {}
+
+
 def collect_rollouts(out_dir, *, dataset, policy, split: str, question_types=("counting",), levels=None,
                      max_per_group: int | None = None, repeats: int = 1, max_pushes: int = 10, image_size: int = 224,
                      answer_size: int | None = None, pusher: str = "finger", workers: int = 2, chunk_episodes: int = 32, seed: int = 0,
@@ -233,6 +245,8 @@ def collect_rollouts(out_dir, *, dataset, policy, split: str, question_types=("c
     env_kwargs = {"max_pushes": int(max_pushes), "image_size": int(image_size), "pusher": pusher}
     if answer_size is not None and int(answer_size) != int(image_size):     # absent otherwise: older stores stay resumable
         env_kwargs["answer_size"] = int(answer_size)
+    elif not overwrite:
+        env_kwargs.update(_answer_camera_held(out_dir, env_kwargs))
     env_kwargs.update(reading_env_options(spec, env_kwargs, ds))     # the counting perception's readers' frames
     run = {"max_pushes": int(max_pushes), "seed": int(seed), "store_depth": bool(store_depth),
            "store_object_map": bool(store_object_map)}

@@ -197,7 +197,8 @@ def test_the_answer_camera_stores_finer_frames_of_the_same_view_and_a_finer_vqa_
                                                                                              tmp_path):
     """``answer_size``: I_start / I_stop through a second camera at 448 px beside the env's 224-px frames (the push
     grid stays at 224); the answer frames are the same view (their 2 × 2 means ≈ the env's render); a VQA reading
-    448-px frames takes them, one reading 224 px the env's, and a finer VQA than a store holds is refused."""
+    448-px frames takes them, one reading 224 px the env's, and a finer VQA than a store holds is refused; a collection
+    asking for no answer camera resumes the store as it is."""
     from mqa_rl.training.vqa_data import ANSWER_IMAGE_KEYS, IMAGE_KEYS, frame_keys, load_answering_records
     out = tmp_path / "answer448"
     collect_rollouts(out, dataset=small_dataset, **{**PLAN, "policy": {"kind": "none"}, "answer_size": 448,
@@ -216,6 +217,9 @@ def test_the_answer_camera_stores_finer_frames_of_the_same_view_and_a_finer_vqa_
     for store, size in ((out, 896), (random_store[0], 448)):
         with pytest.raises(ValueError, match=f"collection.env.answer_size={size}"):
             frame_keys(store, size)
+    # a collection for a VQA reading the env's frames (vqa=eqa) takes this store as it is, not as another plan
+    again = collect_rollouts(out, dataset=small_dataset, **{**PLAN, "policy": {"kind": "none"}, "store_depth": False})
+    assert again["collected_now"] == 0 and json.loads((out / "meta.json").read_text())["env"]["answer_size"] == 448
 
 
 @pytest.mark.parametrize("size", [300, 112, True, 448.5])

@@ -240,8 +240,8 @@ def test_train_vqa_keeps_the_checkpoint_its_validation_metric_picks(small_datase
     train_vqa = load_recipe("train_vqa")
     # the tiny pipeline has one training scene per level, too few to hold one out: hold out every other episode
     monkeypatch.setattr(train_vqa, "scene_split", lambda records, fraction, seed: torch.arange(records.shape[0]) % 2 == 1)
-    args = [*overrides, "logger.wandb=false", "logger.progress=false", "system=random", "encoder.weights=null", "encoder.freeze=false",
-            "train.batch_size=4", "train.eval_interval=1", "train.steps=6", "train.lr=0.05"]
+    args = [*overrides, "logger.wandb=false", "logger.progress=false", "system=random", "vqa=eqa", "encoder.weights=null",
+            "encoder.freeze=false", "train.batch_size=4", "train.eval_interval=1", "train.steps=6", "train.lr=0.05"]
     for select in ("loss", "accuracy"):
         out = tmp_path / select
         summary = train_vqa.train(compose_recipe_config("train_vqa", [*args, f"train.select={select}", f"out_dir={out}"]))

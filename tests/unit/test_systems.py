@@ -58,6 +58,14 @@ def test_evaluate_policy_takes_a_dqn_system_as_its_greedy_policy():
         as_greedy(compose_recipe_config("evaluate_policy", ["system=no_manipulation"]))
 
 
+def test_the_default_answering_vqa_is_the_counting_one_and_its_rollouts_carry_its_answer_camera():
+    assert compose_recipe_config("train_vqa", []).vqa.name == "counting"
+    assert compose_recipe_config("evaluate", []).vqa.name == "counting"
+    assert compose_recipe_config("collect_rollouts", []).collection.env.answer_size == 448
+    assert compose_recipe_config("collect_rollouts", ["vqa=eqa"]).collection.env.answer_size is None
+    assert compose_recipe_config("train_vqa", ["vqa=eqa"]).out_dir.endswith("counting-eqa/random")
+
+
 def test_collect_demonstrations_takes_its_teacher_from_the_registry():
     """teacher=<id>: the options its demonstrations record, every one filled (the image teacher's are the values the
     recipe's own oracle block held before the registry); an oracle.<option> overrides the teacher's."""
