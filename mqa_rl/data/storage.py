@@ -146,7 +146,7 @@ def write_dataset_atomically(out_dir: Path, files: dict[str, bytes], manifest: d
 def read_verified(root: Path) -> tuple[dict, dict[str, bytes]]:
     """The manifest and the bytes of every file it lists, after checking version and checksums."""
     root = Path(root)
-    hint = (f"make it with `python recipes/make_dataset.py dataset.out_dir={root} dataset.seed=<its seed>` (the default "
+    hint = (f"make or regenerate it with `python recipes/make_dataset.py dataset.out_dir={root} dataset.seed=<its seed>` (the default "
             f"seed 0 makes data/mqa's piles: a held-out or pretraining set needs a seed of its own, e.g. the one its "
             f"config's comment names)")
     mpath = root / MANIFEST
