@@ -47,6 +47,7 @@ from mqa_rl.files import write_atomic
 from mqa_rl.modules.kept_frame import reading_env_options
 from mqa_rl.modules.systems import system_spec, systems_by_id
 from mqa_rl.modules.trained_policy import newest_run_checkpoint, read_run_config
+from mqa_rl.training.policy_export import has_dashboards
 from mqa_rl.training.run_dir import RunLock
 from mqa_rl.training.run_logger import RunLogger
 from mqa_rl.transforms.push_memory import memory_radius
@@ -113,7 +114,10 @@ def _evaluate(cfg: DictConfig) -> dict:
         except (TypeError, ValueError):
             raise ValueError(f"stop_margin={cfg.stop_margin!r} must be a number (e.g. 0.5), inf (never stop) or null "
                              f"(plain greedy)") from None
-    references = systems_by_id(cfg.systems, [p for p in cfg.policies if p != "greedy"], REFERENCE_KINDS)
+    try:
+        references = systems_by_id(cfg.systems, [p for p in cfg.policies if p != "greedy"], REFERENCE_KINDS)
+    except ValueError as error:
+        raise ValueError(f"policies: {error}; or greedy, the run's policy") from None
     run_cfg = read_run_config(cfg.run) if cfg.run else None
     dataset = cfg.dataset or (run_cfg.dataset if run_cfg else None)
     if dataset is None:
@@ -175,7 +179,7 @@ def _evaluate(cfg: DictConfig) -> dict:
     for name, text in (("results.json", json.dumps(results, indent=2)), ("results.md", "\n".join(lines) + "\n"),
                        ("config.yaml", OmegaConf.to_yaml(cfg, resolve=True))):   # what these figures were measured with
         write_atomic(out / name, text)
-    if cfg.run and (Path(cfg.run) / "checkpoints").is_dir():     # a training run (an export has no dashboard)
+    if has_dashboards(cfg.run):                                  # a training run's own (an export is read-only)
         frames = Path(cfg.checkpoint or newest_run_checkpoint(cfg.run)).name.rsplit("-", 1)[-1]
         step = int(frames) if frames.isdigit() else 0
         with RunLogger.of_run(cfg.run) as dashboards:           # at the evaluated checkpoint's frames
@@ -212,8 +216,9 @@ def evaluate_snapshots(cfg: DictConfig) -> list[tuple[int, dict]]:
     write_atomic(out / "curve.json", json.dumps({"run": str(cfg.run), "points": [{"frames": f, "results": r} for f, r in points]},
                                                 indent=1))
     plot_learning_curves({Path(cfg.run).name: points}, out / "curve.png")
-    with RunLogger.of_run(cfg.run) as dashboards:
-        dashboards.log_figure("policy_eval/learning_curve", out / "curve.png", points[-1][0])
+    if has_dashboards(cfg.run):
+        with RunLogger.of_run(cfg.run) as dashboards:
+            dashboards.log_figure("policy_eval/learning_curve", out / "curve.png", points[-1][0])
     print(f"learning curve: {out / 'curve.json'}, {out / 'curve.png'}")
     return points
 

@@ -32,6 +32,18 @@ def is_export(folder: Path) -> bool:
     return isinstance(provenance, dict) and "source_run" in provenance and names <= EXPORT_FILES
 
 
+def has_dashboards(run) -> bool:
+    """Whether ``run`` is a train_dqn.py run whose dashboards an evaluation logs into: not an exported policy (e.g. the
+    shipped checkpoints/dqn_*, which an evaluation only reads: its provenance names the run it came from)."""
+    if not run or not (Path(run) / "checkpoints").is_dir():
+        return False
+    try:
+        provenance = json.loads((Path(run) / "provenance.json").read_text())
+    except (OSError, ValueError):
+        return True
+    return not (isinstance(provenance, dict) and "source_run" in provenance)
+
+
 def check_export_target(run: Path, out_dir: Path, overwrite: bool) -> None:
     """``overwrite`` may replace an earlier export only: never the run itself, a folder holding the run, or
     a folder with anything an export does not write (a user's files, another run's checkpoints)."""

@@ -24,3 +24,15 @@ def test_export_policy_refuses_an_export(tmp_path):
     with pytest.raises(ValueError, match="is already an export of .* use it as it is"):
         export.export(cfg)
     assert not (tmp_path / "x").exists()
+
+
+def test_an_evaluation_logs_into_a_training_runs_dashboards_never_into_an_exported_policy(tmp_path):
+    from mqa_rl.training.policy_export import has_dashboards
+
+    run = tmp_path / "run"
+    (run / "checkpoints").mkdir(parents=True)
+    assert has_dashboards(run)
+    export = tmp_path / "export"
+    (export / "checkpoints").mkdir(parents=True)
+    (export / "provenance.json").write_text('{"source_run": "runs/x"}')
+    assert not has_dashboards(export) and not has_dashboards(None) and not has_dashboards(tmp_path / "none")
