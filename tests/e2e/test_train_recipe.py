@@ -99,7 +99,7 @@ def test_tiny_training_run_evaluation_and_curves(small_dataset_dir, tmp_path):
     before = (ev3 / "config.yaml").read_text()
     failed = _run(str(ROOT / "recipes" / "evaluate_policy.py"), f"run={run}", "episodes_per_level=2", "difficulties=[easy]",
                   "policies=[bogus]", "seed=7", f"out_dir={ev3}", cwd=tmp_path, ok=False)
-    assert failed.returncode != 0 and "unknown policy 'bogus'" in failed.stderr
+    assert failed.returncode != 0 and "policies: unknown system 'bogus'" in failed.stderr and "greedy" in failed.stderr
     assert (ev3 / "config.yaml").read_text() == before
     _run(str(ROOT / "recipes" / "plot_curves.py"), str(run), "--out", str(tmp_path / "fig7.png"), cwd=tmp_path)
     assert (tmp_path / "fig7.png").stat().st_size > 0
