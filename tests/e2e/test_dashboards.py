@@ -2,7 +2,8 @@
 (offline) at once, evaluated by recipes/evaluate_policy.py; TensorBoard and MLflow's UI each started on a free port of
 127.0.0.1 as docs/dashboards.md says, opened in Debian's headless Chromium, where the run, a scalar curve and the Q-map
 image are found, and the evaluation beside them; each server stopped after. wandb has no local dashboard: its offline
-run is checked on disk (``wandb sync`` shows it on a wandb server).
+run is checked on disk (``wandb sync`` shows it on a wandb server). In the slow lane: a killed run resumed shows each
+step once on TensorBoard and in the MLflow store, as its CSV has it.
 
 Never skipped: a missing browser fails with the command that installs it (tools/test.sh runs it)."""
 
@@ -10,9 +11,12 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import socket
 import subprocess
 import sys
+import time
+import urllib.request
 from pathlib import Path
 
 import pytest
@@ -106,3 +110,40 @@ def test_the_offline_wandb_run_holds_the_run_and_its_evaluation(run):
     assert len(offline) == 2                                    # the training, then its evaluation: one wandb run
     assert list((offline[0] / "files" / "media" / "images" / "eval").glob("qmap_*.png"))
     assert list((offline[1] / "files" / "media" / "videos" / "policy_eval").glob("easy_0_*.gif"))
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(900)
+def test_a_killed_run_resumed_shows_each_step_once_as_the_csv_has_it(small_dataset_dir, tmp_path):
+    """SIGKILL after 56 frames (the checkpoint at 32), then resume=true: TensorBoard serves the CSV's rows, each step
+    once; the MLflow store holds one run, each step once."""
+    run = tmp_path / "runs" / "r"
+    args = [str(REPO / "recipes" / "train_dqn.py"), "profile=smoke", f"dataset={small_dataset_dir}", f"out_dir={run}",
+            "threads=1", "logger=[tensorboard,mlflow]", "collector.total_frames=96", "collector.annealing_frames=96",
+            "checkpoint.interval_frames=32"]
+    first = subprocess.Popen([sys.executable, *args], cwd=tmp_path, env=ENV, stdout=subprocess.DEVNULL,
+                             stderr=subprocess.DEVNULL)
+    epsilon = run / "csv" / "scalars" / "train" / "epsilon.csv"
+    deadline = time.time() + 600
+    while not (epsilon.exists() and int(epsilon.read_text().split()[-1].split(",")[0]) >= 56):
+        assert first.poll() is None and time.time() < deadline, "the run ended before 56 frames"
+        time.sleep(0.2)
+    first.send_signal(signal.SIGKILL)
+    first.wait()
+    assert "resumed from" in _run(*args, "resume=true", cwd=tmp_path).stdout
+
+    def csv_rows(name):
+        return [(int(s), round(float(v), 5)) for s, v in (line.split(",") for line in
+                                                          (run / "csv" / "scalars" / f"{name}.csv").read_text().split())]
+    with serving("tensorboard", run.parent) as url:
+        for name in ("train/epsilon", "train/loss", "eval/reward"):
+            with urllib.request.urlopen(f"{url}data/plugin/scalars/scalars?run=r/tensorboard&tag={name}") as answer:
+                served = [(step, round(value, 5)) for _, step, value in json.load(answer)]
+            assert served == csv_rows(name) and served[-1][0] == 96, name
+    import mlflow
+
+    saved = json.loads((run / "mlflow_run.json").read_text())
+    client = mlflow.MlflowClient(saved["tracking_uri"])
+    steps = [m.step for m in client.get_metric_history(saved["run_id"], "train/epsilon")]
+    assert steps == list(range(8, 97, 8))
+    assert len(client.search_runs([client.get_run(saved["run_id"]).info.experiment_id])) == 1
