@@ -28,7 +28,7 @@ def dashboard_command(kind: str, target: Path, port: int) -> list[str]:
 
 @contextlib.contextmanager
 def serving(kind: str, target: Path, timeout: float = 180):
-    """The dashboard server for the block; yields its URL once it answers. Its processes (a session of their own)
+    """The dashboard server for the block; yields its URL once it answers. Its processes (a process group of their own)
     are stopped at the end, and the port is free again."""
     port = free_port()
     log = tempfile.NamedTemporaryFile("w+", suffix=f"-{kind}.log")
