@@ -32,7 +32,7 @@ from torchrl.checkpoint import Checkpoint, CheckpointRotation
 
 from mqa_rl import keys
 from mqa_rl.collectors.demonstrations import load_demonstrations
-from mqa_rl.collectors.factory import make_collector, running, share_train_steps
+from mqa_rl.collectors.factory import check_collector, make_collector, running, share_train_steps
 from mqa_rl.collectors.replay import annealed_is_beta, compact_transitions, make_replay_buffer
 from mqa_rl.envs.qmap_overlay import qmap_episode_frames, qmap_image
 from mqa_rl.envs.video import write_video
@@ -196,6 +196,7 @@ def evaluate(env, actor, cfg: DictConfig, logger: RunLogger, step: int) -> dict[
 
 def train(cfg: DictConfig) -> dict:
     check_config(cfg)
+    check_collector(cfg.collector, cfg.ray.address)      # a Ray head that does not answer: before out_dir exists
     out = Path(cfg.out_dir)
     created = not out.exists()                   # a refused init_from removes only a folder this run made
     with RunLock(out, "train_dqn.py"):

@@ -24,7 +24,7 @@ from collections.abc import Mapping
 import torch
 from torchrl.collectors import BaseCollector, Collector, MultiAsyncCollector, MultiSyncCollector
 
-from mqa_rl.collectors.ray_pool import import_ray, ray_init_options
+from mqa_rl.collectors.ray_pool import check_ray_address, import_ray, ray_init_options
 from mqa_rl.transforms.beta import BetaSchedule
 from mqa_rl.transforms.factory import make_reward_transform
 from mqa_rl.transforms.mqa_env import make_mqa_env
@@ -32,16 +32,28 @@ from mqa_rl.transforms.mqa_env import make_mqa_env
 KINDS = ("single", "multi_sync", "multi_async", "ray")
 
 
-def make_collector(cfg: Mapping, policy, env_kwargs: Mapping, *, total_frames: int, init_random_frames: int = 0,
-                   seed: int | None = None, ray_address: str | None = None) -> BaseCollector:
-    """A collector of ``policy`` on ``make_mqa_env(**env_kwargs)``; ``env_kwargs`` may hold the shared counter."""
+def check_collector(cfg: Mapping, ray_address: str | None = None) -> None:
+    """The ``collector`` config's errors, for a recipe to raise before it writes anything: an unknown kind, a worker
+    count the kind cannot run, and for ``ray`` a ``ray.address`` where no Ray head answers (TorchRL's RayCollector
+    calls ``ray.init`` itself, which retries such an address for minutes: ``check_ray_address``)."""
     kind = cfg.get("kind", "single")
     workers = int(cfg.get("num_workers", 1))
-    frames_per_batch = int(cfg["frames_per_batch"])
     if kind not in KINDS:
         raise ValueError(f"collector.kind={kind!r}; choose one of {KINDS}")
     if workers < 1 or (kind == "single" and workers != 1):
-        raise ValueError(f"collector.num_workers={workers}: 'single' runs exactly 1 env, the multi kinds ≥ 1")
+        raise ValueError(f"collector.num_workers={workers}: 'single' runs exactly 1 env, the multi kinds and ray ≥ 1")
+    if kind == "ray":
+        import_ray()
+        check_ray_address(ray_address)
+
+
+def make_collector(cfg: Mapping, policy, env_kwargs: Mapping, *, total_frames: int, init_random_frames: int = 0,
+                   seed: int | None = None, ray_address: str | None = None) -> BaseCollector:
+    """A collector of ``policy`` on ``make_mqa_env(**env_kwargs)``; ``env_kwargs`` may hold the shared counter."""
+    check_collector(cfg, ray_address)
+    kind = cfg.get("kind", "single")
+    workers = int(cfg.get("num_workers", 1))
+    frames_per_batch = int(cfg["frames_per_batch"])
     if frames_per_batch % workers or total_frames % frames_per_batch:
         raise ValueError(f"collector.frames_per_batch={frames_per_batch} must be a multiple of num_workers={workers}, "
                          f"and total frames {total_frames} a multiple of frames_per_batch")
@@ -50,7 +62,6 @@ def make_collector(cfg: Mapping, policy, env_kwargs: Mapping, *, total_frames: i
     if kind == "single":
         coll = Collector(make_mqa_env, policy, create_env_kwargs=dict(env_kwargs), **common)
     elif kind == "ray":
-        import_ray()
         from torchrl.collectors.distributed import RayCollector
 
         # a fresh dict per call: RayCollector adds its own keys to the one it is given

@@ -35,11 +35,24 @@ RAY_EXTRA = ("the Ray backend needs the 'ray' extra: pip install -e '.[ray]' (to
 REPO_ROOT = str(Path(__file__).resolve().parents[2])
 
 
-def check_backend(backend: str, what: str = "backend") -> str:
+def check_backend(backend: str, what: str = "backend", workers: int | None = None,
+                  workers_what: str = "workers") -> str:
+    """``backend``, or a ValueError listing the choices; with ``workers``, also one when the Ray backend would get
+    no actor (a local Ray of 0 CPUs places none: it would wait forever), before anything is written."""
     if backend not in BACKENDS:
         raise ValueError(f"{what}={backend!r}: choose one of {list(BACKENDS)} (local: processes on this machine; "
                          "ray: actors on a Ray cluster, ray.address=auto or host:port joins one)")
+    if backend == "ray" and workers is not None:
+        check_workers(workers, workers_what)
     return backend
+
+
+def check_workers(workers: int, what: str = "workers") -> int:
+    """``workers`` for the Ray backend: at least one actor (one CPU each; a local Ray gets that many CPUs)."""
+    if int(workers) < 1:
+        raise ValueError(f"{what}={workers}: the Ray backend runs one actor of one CPU per worker, so it needs "
+                         f"{what} ≥ 1 (a local Ray started with {workers} CPUs would never place one)")
+    return int(workers)
 
 
 def import_ray():
@@ -69,14 +82,13 @@ def ray_session(address: str | None = None, num_cpus: int | None = None):
     if ray.is_initialized():
         yield ray
         return
-    hint = ("start one (ray start --head), or leave ray.address unset for a local Ray; a cluster with token "
-            "authentication needs RAY_AUTH_MODE=token here and its ~/.ray/auth_token")
-    if address and address != "auto" and not _listening(address):     # Ray itself retries for minutes
-        raise ConnectionError(f"nothing listens at ray.address={address!r}: {hint}")
+    if not address and num_cpus is not None:
+        check_workers(num_cpus)
+    check_ray_address(address)                  # where Ray itself would retry for minutes
     try:
         ray.init(**ray_init_options(address, num_cpus))
     except ConnectionError as error:
-        raise ConnectionError(f"no Ray cluster at ray.address={address!r}, or it refused this driver: {hint}") from error
+        raise ConnectionError(f"no Ray cluster at ray.address={address!r}, or it refused this driver: {HINT}") from error
     try:
         yield ray
     finally:
@@ -105,6 +117,56 @@ def _listening(address: str, timeout: float = 5.0) -> bool:
             return True
     except (OSError, ValueError):
         return False
+
+
+HINT = ("ray.address is the address `ray start --head` printed (its GCS port, 6379 by default; not the dashboard's "
+        "8265 nor a worker node's port): start a head there (ray start --head), or leave ray.address unset for a "
+        "local Ray; a cluster with token authentication needs RAY_AUTH_MODE=token here and its ~/.ray/auth_token")
+
+
+def check_ray_address(address: str | None, timeout: float = 5.0) -> None:
+    """Fail within seconds, saying what to do, where ``ray.init(address=...)`` would retry for minutes (the GCS
+    client reconnects ~20 times for ~40 s each): nothing listens there, something that is not a Ray head does
+    (the dashboard's port, a worker node's), or a head that refuses this driver's token. It asks the head's GCS
+    for its cluster id, as ``ray.init`` does first, at the address ``ray.init`` would use (``auto`` resolved as Ray
+    resolves it). None or "local" (a local Ray) passes; a Ray Client address (``ray://``) is only checked to listen."""
+    if not address or address == "local":
+        return
+    import_ray()
+    if address.startswith("ray://"):
+        if not _listening(address.removeprefix("ray://")):
+            raise ConnectionError(f"nothing listens at ray.address={address!r}: start the head's Ray Client server, "
+                                  f"or {HINT}")
+        return
+    from ray._private import services
+
+    try:
+        target = services.canonicalize_bootstrap_address(address)
+    except ConnectionError as error:        # auto with no cluster on this machine
+        raise ConnectionError(f"ray.address={address!r}: {error} {HINT}") from None
+    except ValueError as error:
+        raise ValueError(f"ray.address={address!r} is no address ({error}): host:port, auto, or unset") from None
+    shown = repr(address) if target == address else f"{address!r} ({target})"
+    if not _listening(target, timeout):
+        raise ConnectionError(f"nothing listens at ray.address={shown}: {HINT}")
+    import grpc
+    from ray._private.grpc_utils import init_grpc_channel
+    from ray.core.generated import gcs_service_pb2, gcs_service_pb2_grpc
+
+    channel = init_grpc_channel(target)
+    try:
+        gcs_service_pb2_grpc.NodeInfoGcsServiceStub(channel).GetClusterId(gcs_service_pb2.GetClusterIdRequest(),
+                                                                          timeout=timeout)
+    except grpc.RpcError as error:
+        code = error.code()
+        if code == grpc.StatusCode.UNAUTHENTICATED:
+            raise ConnectionError(f"the Ray head at ray.address={shown} refuses this driver's credentials "
+                                  f"({error.details()}): set RAY_AUTH_MODE=token here and copy the cluster's "
+                                  "~/.ray/auth_token (or RAY_AUTH_TOKEN)") from None
+        raise ConnectionError(f"something listens at ray.address={shown} but does not answer as a Ray head's GCS "
+                              f"({code.name}: {(error.details() or '')[:200]}): {HINT}") from None
+    finally:
+        channel.close()
 
 
 # Ray 2.60 authenticates with a token (~/.ray/auth_token, made by the first head): the nodes and the driver must

@@ -233,7 +233,7 @@ def collect_rollouts(out_dir, *, dataset, policy, split: str, question_types=("c
     ``out_dir``; returns a summary with the time taken. See the module docstring."""
     if repeats < 1 or chunk_episodes < 1:
         raise ValueError(f"repeats ({repeats}) and chunk_episodes ({chunk_episodes}) must be ≥ 1")
-    check_backend(backend, "collection.backend")
+    check_backend(backend, "collection.backend", workers, "collection.workers")
     ds = dataset if isinstance(dataset, MQADataset) else MQADataset(dataset)
     spec = resolve_checkpoint(policy)
     question_types = list(question_types)
