@@ -8,8 +8,9 @@
 
 Each actor runs ``initializer(*initargs)`` once (it builds its env and policy) and then ``fn(task)`` for
 the tasks it is handed, one at a time, in a process whose module globals hold what the initializer built,
-as a pool worker's do. The driver keeps two tasks in flight per actor (one running, one queued, so an actor
-never waits for the driver) and hands the next one to whichever actor finishes first, so a slow node takes
+as a pool worker's do. The pool starts no more actors than the cluster has CPUs free for, and the driver keeps
+two tasks in flight per running actor (one running, one queued, so an actor never waits for the driver; none on
+an actor not placed yet) and hands the next one to whichever actor finishes first, so a slow node takes
 fewer. A task whose actor dies (its process killed, its node lost) is handed to another actor, and a new actor replaces the dead one (up to ``max_replacements``): the
 caller, which alone writes results, sees every task's result exactly once, so nothing is lost or
 duplicated. The actors are the TorchRL-free half of the Ray backend; DQN training uses TorchRL's own
@@ -237,63 +238,130 @@ def _stop_session(session: str | None) -> None:
 
 
 class RayPool:
-    """``workers`` Ray actors (``cpus_per_worker`` CPUs each) with ``imap_unordered``; see the module docstring."""
+    """``workers`` Ray actors (``cpus_per_worker`` CPUs each) with ``imap_unordered``; see the module docstring.
+
+    An actor the cluster cannot place yet (its CPUs taken) would hold the tasks queued on it forever, so the pool
+    starts no more actors than the cluster has CPUs free for, and hands tasks only to actors that run (placed and
+    initialised); each says so in a printed line when it changes the plan."""
 
     def __init__(self, workers: int, initializer: Callable | None = None, initargs: tuple = (), *,
-                 cpus_per_worker: float = 1.0, max_replacements: int | None = None, tasks_per_worker: int = 2):
+                 cpus_per_worker: float = 1.0, max_replacements: int | None = None, tasks_per_worker: int = 2,
+                 free_wait_s: float = 3.0):
         ray = import_ray()
         if not ray.is_initialized():
             raise RuntimeError("RayPool needs Ray up: use it inside `with ray_session(...)`")
         if workers < 1:
             raise ValueError(f"workers={workers}: need at least one Ray actor")
         self._ray = ray
+        self._cpus = float(cpus_per_worker)
+        free = self._free_slots(workers, free_wait_s)
+        if free < 1:
+            raise RuntimeError(f"the Ray cluster has no CPU free for an actor of {cpus_per_worker:g} CPU "
+                               f"({ray.cluster_resources().get('CPU', 0):g} CPUs, all taken): wait for its other "
+                               "jobs, add a node, or use backend=local")
+        if workers > free:
+            print(f"RayPool: {workers} actors asked for, the Ray cluster has CPUs free for {free}: starting {free}",
+                  flush=True)
+            workers = free
         self._cls = ray.remote(num_cpus=cpus_per_worker, max_restarts=0)(_Worker)
         self._init = (initializer, initargs)
         self.per_actor = max(1, int(tasks_per_worker))
         self.replacements_left = workers if max_replacements is None else int(max_replacements)
+        self._starting: dict = {}                   # readiness ref -> actor not yet running (unplaced, initialising)
+        self.running: list = []                     # actors placed and initialised: the only ones given tasks
         self.actors = [self._spawn() for _ in range(workers)]
         self.deaths = 0
 
-    def _spawn(self):
-        return self._cls.remote(*self._init)
+    def _free_slots(self, wanted: int, wait_s: float) -> int:
+        """Actors the cluster has CPUs free for now (a pool just terminated frees its CPUs within ~1 s: wait that)."""
+        deadline = time.time() + wait_s
+        while True:
+            free = int(self._ray.available_resources().get("CPU", 0.0) / self._cpus + 1e-9)
+            if free >= wanted or time.time() >= deadline:
+                return free
+            time.sleep(0.2)
 
-    def imap_unordered(self, fn: Callable, tasks: Iterable, chunksize: int = 1) -> Iterator:
+    def _spawn(self):
+        actor = self._cls.remote(*self._init)
+        self._starting[actor.__ray_ready__.remote()] = actor
+        return actor
+
+    def _lost(self, actor, slots: list) -> list:
+        """Forget a dead actor (and start its replacement while any are left); the slots without it."""
+        if actor in self.actors:
+            self.deaths += 1
+            self.actors.remove(actor)
+            if actor in self.running:
+                self.running.remove(actor)
+            if self.replacements_left > 0:
+                self.replacements_left -= 1
+                self.actors.append(self._spawn())
+        return [a for a in slots if a is not actor]
+
+    def _promote(self, refs: list, slots: list, error_box: list) -> list:
+        """Actors whose readiness ``refs`` came back: running ones get task slots, dead ones are replaced."""
+        for ref in refs:
+            actor = self._starting.pop(ref)
+            try:
+                self._ray.get(ref)
+            except _died(self._ray) as error:
+                error_box[:] = [error]
+                slots = self._lost(actor, slots)
+                continue
+            if actor in self.actors:
+                self.running.append(actor)
+                slots = slots + [actor] * self.per_actor
+        return slots
+
+    def imap_unordered(self, fn: Callable, tasks: Iterable, chunksize: int = 1, wait_note_s: float = 60.0) -> Iterator:
         ray = self._ray
         queue = deque(tasks)
         in_flight: dict = {}                        # object ref -> (actor, task)
-        # two tasks per actor: the next one waits in the actor's queue while the driver takes in a result
-        slots = [a for a in self.actors for _ in range(self.per_actor)]
+        # two tasks per running actor: the next one waits in the actor's queue while the driver takes in a result
+        slots = [a for a in self.running for _ in range(self.per_actor)]
+        last_error: list = []
+        waiting_since = time.time()
         while queue or in_flight:
+            if self._starting:                       # every actor that has started running since the last pass
+                done, _ = ray.wait(list(self._starting), num_returns=len(self._starting), timeout=0)
+                slots = self._promote(done, slots, last_error)
+            if not self.actors:
+                raise RuntimeError(f"every Ray worker died ({self.deaths}); the last error: "
+                                   f"{last_error[0] if last_error else '?'}")
             while queue and slots:
                 actor = slots.pop()
                 task = queue.popleft()
                 in_flight[actor.run.remote(fn, task)] = (actor, task)
-            ready, _ = ray.wait(list(in_flight), num_returns=1)
+            ready, _ = ray.wait([*in_flight, *self._starting], num_returns=1, timeout=wait_note_s)
+            if not ready:
+                if not in_flight:
+                    print(f"RayPool: no actor running after {time.time() - waiting_since:.0f} s "
+                          f"({len(self._starting)} waiting for a CPU or still initialising; the cluster has "
+                          f"{ray.available_resources().get('CPU', 0):g} CPUs free)", flush=True)
+                continue
+            if ready[0] in self._starting:
+                slots = self._promote(ready, slots, last_error)
+                continue
             actor, task = in_flight.pop(ready[0])
             try:
                 result = ray.get(ready[0])
             except _died(ray) as error:
                 queue.appendleft(task)               # run again elsewhere: its result was never delivered
-                if actor in self.actors:             # the first of its tasks to report the death
-                    self.deaths += 1
-                    self.actors.remove(actor)
-                    slots = [a for a in slots if a is not actor]
-                    if self.replacements_left > 0:
-                        self.replacements_left -= 1
-                        replacement = self._spawn()
-                        self.actors.append(replacement)
-                        slots += [replacement] * self.per_actor
-                if not self.actors:
-                    raise RuntimeError(f"every Ray worker died ({self.deaths}); the last error: {error}") from error
+                last_error[:] = [error]
+                slots = self._lost(actor, slots)     # the first of its tasks to report the death counts it
                 continue
             slots.append(actor)
+            waiting_since = time.time()
             yield result
+        if self._starting:
+            print(f"RayPool: {len(self._starting)} of {len(self.actors)} actors not running (no CPU free for them on "
+                  "the Ray cluster, or still starting): the running ones ran every task", flush=True)
 
     def terminate(self) -> None:
         for actor in self.actors:
             with contextlib.suppress(Exception):
                 self._ray.kill(actor)
-        self.actors = []
+        self.actors, self.running, self._starting = [], [], {}
 
     def join(self) -> None:
         pass
