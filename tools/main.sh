@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The main job: set up the machine if needed, then show the MQA system working from the shipped checkpoints
-# (checkpoints/README.md), ~8 min on 2 CPU cores after set-up, dataset included:
+# (checkpoints/README.md), ~9 min on 2 CPU cores after set-up, dataset included:
 #   1. make the default dataset unless a valid one is there (2 processes), and print its summary;
 #   2. Table III on a sample: no manipulation, random, our best learned system (the countable student pushing its
 #      budget, answering from the frame its perception counts most in) and the privileged oracle answer
