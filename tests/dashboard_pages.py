@@ -1,4 +1,4 @@
-"""A run's dashboards as a person opens them (tests/e2e/test_dashboards.py, the screenshot in docs/figures): the
+"""A run's dashboards as a person opens them (tests/e2e/test_dashboards_browser.py, the screenshot in docs/figures): the
 dashboard's own server started on a free port of 127.0.0.1 and stopped after, its page read in Debian's headless
 Chromium (``mqa_rl.demo.page_driver.chromium``). Elements are found by the dashboards' own component names."""
 
