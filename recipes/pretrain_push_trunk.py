@@ -36,7 +36,6 @@ import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
 from tensordict import TensorDict
-from tqdm import tqdm
 
 from mqa_rl import keys
 from mqa_rl.collectors.class_frames import collect_class_frames
@@ -51,6 +50,7 @@ from mqa_rl.training.run_logger import RunLogger
 from mqa_rl.training.signals import exit_on_sigterm
 from mqa_rl.training.vqa_data import scene_split
 from mqa_rl.envs.dihedral import random_dihedral_in
+from mqa_rl.progress import Progress
 
 RECOGNITION_FILE = "recognition.pt"
 
@@ -170,7 +170,7 @@ def pretrain(cfg: DictConfig) -> dict:
     best = {"step": 0}
     t0 = time.perf_counter()
     window: dict[str, list[float]] = {}
-    bar = tqdm(total=t.steps, unit="step", dynamic_ncols=True, disable=not cfg.logger.progress)
+    bar = Progress(t.steps, "pretraining", unit="step", disable=not cfg.logger.progress)
     try:
         for step in range(1, t.steps + 1):
             batch = train_frames[torch.randint(len(train_frames), (t.batch_size,))]

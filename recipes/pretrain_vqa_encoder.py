@@ -28,7 +28,6 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 from tensordict import TensorDict
 from torch import nn
-from tqdm import tqdm
 
 from mqa_rl import keys
 from mqa_rl.data import MQADataset
@@ -42,6 +41,7 @@ from mqa_rl.training.run_logger import RunLogger, trim_scalars
 from mqa_rl.training.signals import exit_on_sigterm
 from mqa_rl.training.vqa_data import pretraining_frames, scene_split
 from mqa_rl.envs.dihedral import random_dihedral_in
+from mqa_rl.progress import Progress
 
 ENCODER_FILE = "encoder.pt"
 
@@ -135,7 +135,7 @@ def pretrain(cfg: DictConfig) -> dict:
     meta = {"dataset_sha256": source["dataset_sha256"], "classes": list(source["classes"]), "frames": len(frames),
             "stores": list(source["stores"])}
 
-    bar = tqdm(total=t.steps, initial=state["step"], unit="step", dynamic_ncols=True, disable=not cfg.logger.progress)
+    bar = Progress(t.steps, "encoder pretraining", unit="step", initial=state["step"], disable=not cfg.logger.progress)
     window: dict[str, list[float]] = {}
     try:
         while state["step"] < t.steps:

@@ -31,7 +31,6 @@ import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
 from tensordict import TensorDict
-from tqdm import tqdm
 
 from mqa_rl import keys
 from mqa_rl.collectors.frame_records import DEPTH_SCHEMA, load_frames
@@ -48,6 +47,7 @@ from mqa_rl.training.run_logger import RunLogger, trim_scalars
 from mqa_rl.training.signals import exit_on_sigterm
 from mqa_rl.training.vqa_data import scene_split
 from mqa_rl.envs.dihedral import random_dihedral
+from mqa_rl.progress import Progress
 
 PERCEPTION_FILE = "perception.pt"
 # what training reads of a frame (a depth perception also its DEPTH: an rgb run leaves it on disk)
@@ -200,7 +200,7 @@ def _train(cfg: DictConfig, out: Path) -> dict:
                                             "plan": m["plan"]} for s, m in zip(cfg.frames.stores, metas)],
             "train_frames": n_train, "val_frames": int(val.shape[0]), "config": config}
 
-    bar = tqdm(total=steps, initial=state["step"], unit="step", dynamic_ncols=True, disable=not cfg.logger.progress)
+    bar = Progress(steps, "perception", unit="step", initial=state["step"], disable=not cfg.logger.progress)
     window: dict[str, list[float]] = {}
     t_window = time.perf_counter()
     try:

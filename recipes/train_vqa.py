@@ -28,7 +28,6 @@ import hydra
 import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
-from tqdm import tqdm
 
 from mqa_rl import keys
 from mqa_rl.data.dataset import dataset_fingerprint
@@ -48,6 +47,7 @@ from mqa_rl.training.vqa_build import build_model, start_from
 from mqa_rl.training.vqa_data import (Batches, encode_store, load_answering_records, question_class_labels, scene_split,
                                      encoder_fingerprint)
 from mqa_rl.envs.dihedral import DIHEDRAL
+from mqa_rl.progress import Progress
 
 # validation metric that picks the kept checkpoint -> its score (higher is better)
 SELECT = {"accuracy": lambda m: m["val/accuracy"], "loss": lambda m: -m["val/loss"]}
@@ -167,7 +167,7 @@ def _train(cfg: DictConfig, out: Path) -> dict:
     t0 = time.perf_counter()
     if frozen:
         transforms = DIHEDRAL if cfg.train.augment and not model.invariant_features else 1
-        bar = tqdm(total=int(meta["slots"]) * 2, unit="frame", desc=f"encoding ×{transforms}", disable=not cfg.logger.progress)
+        bar = Progress(int(meta["slots"]) * 2, f"encoding ×{transforms}", unit="frame", disable=not cfg.logger.progress)
         model.eval()
         records = encode_store(cfg.rollouts, lambda x: model.encode_frames(x.to(device)).cpu(), transforms=transforms,
                                size=model.frame_size, progress=bar,
@@ -194,7 +194,7 @@ def _train(cfg: DictConfig, out: Path) -> dict:
                 "train_episodes": len(train_set), "val_episodes": int(val_mask.sum())}
 
     stop = False                                       # no better val/<select> in train.patience_steps
-    bar = tqdm(total=steps, initial=state["step"], unit="step", dynamic_ncols=True, disable=not cfg.logger.progress)
+    bar = Progress(steps, "vqa", unit="step", initial=state["step"], disable=not cfg.logger.progress)
     window_loss, window_acc, window_ground, t_start = [], [], [], time.perf_counter()
     try:
         while state["step"] < steps:

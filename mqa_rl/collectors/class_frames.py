@@ -10,11 +10,11 @@ from __future__ import annotations
 
 import torch
 from tensordict import TensorDict
-from tqdm import tqdm
 
 from mqa_rl import keys
 from mqa_rl.data.dataset import LEVELS
 from mqa_rl.envs import actions
+from mqa_rl.progress import Progress
 
 
 def collect_class_frames(env, frames: int, *, max_pushes: int, seed: int = 0, progress: bool = True) -> TensorDict:
@@ -26,7 +26,7 @@ def collect_class_frames(env, frames: int, *, max_pushes: int, seed: int = 0, pr
     env.set_seed(seed)
     scene_index = {s.id: i for i, s in enumerate(env.dataset.scenes)}
     out = []
-    bar = tqdm(total=frames, desc="frames", disable=not progress)
+    bar = Progress(frames, "frames", unit="frame", disable=not progress)
     while len(out) < frames:
         td = env.reset()
         pushes = int(torch.randint(max_pushes + 1, (), generator=generator))

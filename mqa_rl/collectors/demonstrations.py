@@ -15,13 +15,13 @@ from pathlib import Path
 
 import torch
 from tensordict import TensorDict
-from tqdm import tqdm
 
 from mqa_rl import keys
 from mqa_rl.collectors.replay import OBS_KEYS
 from mqa_rl.data.dataset import dataset_fingerprint
 from mqa_rl.files import load_memmap
 from mqa_rl.modules.privileged_policy import PrivilegedPushPolicy
+from mqa_rl.progress import Progress
 
 DEMO_KEYS = (*OBS_KEYS, keys.TARGET_CELLS, keys.ACTION)
 DEMOS_META = "demos.json"            # beside the memmap folder "data": written last (recipes/collect_demonstrations.py)
@@ -34,7 +34,7 @@ def collect_demonstrations(env, states: int, *, progress: bool = True, **oracle_
         raise ValueError(f"need states ≥ 1, got {states}")
     oracle = PrivilegedPushPolicy(env, **oracle_options)
     out = []
-    bar = tqdm(total=states, desc="demonstrations", disable=not progress)
+    bar = Progress(states, "demonstrations", unit="state", disable=not progress)
     while len(out) < states:
         td = env.reset()
         while len(out) < states:

@@ -31,7 +31,6 @@ from pathlib import Path
 import torch
 import torch.nn.functional as F
 from tensordict import TensorDict
-from tqdm import tqdm
 
 from mqa_rl import keys
 from mqa_rl.collectors.rollouts import episode_seed, object_map
@@ -41,6 +40,7 @@ from mqa_rl.data.dataset import LEVELS, MQADataset, dataset_fingerprint
 from mqa_rl.envs import actions
 from mqa_rl.envs.sapien_bin import MAX_OBJECTS, SapienBinEnv
 from mqa_rl.modules.perception import RENDER_SIZE, resize_depth
+from mqa_rl.progress import Progress
 
 
 def scene_fingerprint(scene) -> str:
@@ -153,7 +153,7 @@ def collect_perception_frames(out_dir, dataset, *, episodes_per_scene: int, push
         else:
             pool = mp.get_context("spawn").Pool(min(workers, max(len(todo), 1)), initializer=_init, initargs=(str(ds.root), int(render), run))
             results = pool.imap_unordered(_task, todo)
-        bar = tqdm(total=len(tasks) * (pushes + 1), initial=len(done), unit="frame", disable=not progress, desc="frames")
+        bar = Progress(len(tasks) * (pushes + 1), "frames", unit="frame", initial=len(done), disable=not progress)
         buffer: list[TensorDict] = []
         try:
             for record in results:
