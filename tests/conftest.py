@@ -107,3 +107,21 @@ def answering_root(small_dataset_dir, tmp_path_factory):
         collect.collect(compose_recipe_config("collect_rollouts", [*overrides, f"system={system}", "vqa=eqa",
                                                                    "progress=false"]))
     return root, overrides
+
+
+@pytest.fixture
+def dashboard_port():
+    """A port where an HTTP server listens, as a Ray dashboard (8265) does: a TCP connection succeeds there, Ray's
+    own connection retries for minutes (the Ray address checks' tests, unit and ray lane)."""
+    import http.server
+    import threading
+
+    class Quiet(http.server.BaseHTTPRequestHandler):
+        def log_message(self, *args):
+            pass
+
+    server = http.server.ThreadingHTTPServer(("0.0.0.0", 0), Quiet)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    yield server.server_address[1]
+    server.shutdown()
+    server.server_close()

@@ -26,21 +26,6 @@ def dqn_config(tmp_path, dataset, *overrides):
                                                "collector.num_workers=2", f"out_dir={tmp_path / 'run'}", *overrides])
 
 
-@pytest.fixture
-def dashboard_port():
-    """An HTTP server's port, as the dashboard's 8265 (the loopback cluster runs none): Ray retried it for minutes."""
-    import http.server
-    import threading
-
-    class Quiet(http.server.BaseHTTPRequestHandler):
-        def log_message(self, *args):
-            pass
-
-    server = http.server.ThreadingHTTPServer(("0.0.0.0", 0), Quiet)
-    threading.Thread(target=server.serve_forever, daemon=True).start()
-    yield server.server_address[1]
-    server.shutdown()
-    server.server_close()
 
 
 @pytest.mark.timeout(180)

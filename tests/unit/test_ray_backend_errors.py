@@ -37,21 +37,6 @@ def test_nothing_listening_says_what_to_start():
 
 
 # ----------------------------------------------------------------------------- an address Ray would retry for minutes
-@pytest.fixture
-def dashboard_port():
-    """A port where an HTTP server listens, as a Ray dashboard (8265) does: a TCP connection succeeds there."""
-    import http.server
-    import threading
-
-    class Quiet(http.server.BaseHTTPRequestHandler):
-        def log_message(self, *args):
-            pass
-
-    server = http.server.ThreadingHTTPServer(("0.0.0.0", 0), Quiet)
-    threading.Thread(target=server.serve_forever, daemon=True).start()
-    yield server.server_address[1]
-    server.shutdown()
-    server.server_close()
 
 
 def free_port() -> int:
