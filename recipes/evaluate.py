@@ -90,7 +90,7 @@ def evaluate_system(cfg: DictConfig, ds: MQADataset, name: str, plan_sha: str) -
         return missing(f"no trained policy in {spec['run']}", policy_command(name, spec["run"])), None, None
     store = Path(cfg.rollouts_dir) / name / "test"
     vqa_paths = [Path(d) / name / CHECKPOINT_NAME for d in vqa_dirs(cfg)]
-    train_cmd = (f"python recipes/collect_rollouts.py system={name} questions={q} vqa={v} && "
+    train_cmd = (f"python recipes/collect.py what=rollouts system={name} questions={q} vqa={v} && "
                  f"python recipes/train_vqa.py system={name} questions={q} vqa={v}")
     absent = [p for p in vqa_paths if not p.exists()]
     if absent:
@@ -105,7 +105,7 @@ def evaluate_system(cfg: DictConfig, ds: MQADataset, name: str, plan_sha: str) -
         records = load_records(store, EVAL_KEYS)
     except (FileNotFoundError, StoreError) as error:
         if not cfg.collect_missing:
-            return missing(f"no complete test rollouts ({error})", f"python recipes/collect_rollouts.py system={name} "
+            return missing(f"no complete test rollouts ({error})", f"python recipes/collect.py what=rollouts system={name} "
                                                                    f"questions={q} vqa={v} 'splits=[test]'"), None, None
         collect_split(store, "test", dataset=ds, policy=spec, questions=OmegaConf.to_container(cfg.questions),
                       collection=collection, progress=cfg.progress, ray_address=cfg.ray.address)
@@ -113,7 +113,7 @@ def evaluate_system(cfg: DictConfig, ds: MQADataset, name: str, plan_sha: str) -
     collect_seconds = time.perf_counter() - t0
     if read_meta(store)["plan"]["questions_sha256"] != plan_sha:
         return missing(f"the test rollouts in {store} cover other questions than questions={q} asks",
-                       f"python recipes/collect_rollouts.py system={name} questions={q} 'splits=[test]' overwrite=true"), None, None
+                       f"python recipes/collect.py what=rollouts system={name} questions={q} 'splits=[test]' overwrite=true"), None, None
     if read_meta(store)["policy"] != spec:
         warnings.warn(f"{store} was collected with policy {read_meta(store)['policy']}, the config now says {spec}",
                       stacklevel=2)
@@ -129,7 +129,7 @@ def evaluate_system(cfg: DictConfig, ds: MQADataset, name: str, plan_sha: str) -
     try:   # the frames this VQA reads: the answer camera's where its perception reads finer than the env renders
         frame_keys(store, model.frame_size)
     except ValueError as error:
-        return missing(str(error), f"python recipes/collect_rollouts.py system={name} questions={q} 'splits=[test]' "
+        return missing(str(error), f"python recipes/collect.py what=rollouts system={name} questions={q} 'splits=[test]' "
                                    f"collection.env.answer_size={model.frame_size} overwrite=true"), None, None
     t1 = time.perf_counter()
     right = predict_from_store(model, store, records, cfg.batch_size) == records.get(keys.ANSWER_LABEL)

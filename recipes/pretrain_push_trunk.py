@@ -164,7 +164,7 @@ def pretrain(cfg: DictConfig) -> dict:
     params = [*net.rgb_trunk.parameters(), *net.class_head.parameters()]
     optim = torch.optim.Adam(params, lr=t.lr)
     config = OmegaConf.to_container(cfg, resolve=True)
-    logger = RunLogger(out, wandb=cfg.logger.wandb, project=cfg.logger.project, exp_name="push_recognition", config=config)
+    logger = RunLogger(out, cfg.logger, exp_name="push_recognition", config=config)
     meta = {"dataset_sha256": dataset_fingerprint(dataset.root), "frames": len(frames), "val_frames": len(val_frames),
             **init_meta}
     best = {"step": 0}

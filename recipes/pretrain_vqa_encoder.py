@@ -2,7 +2,7 @@
 image, label every pixel with its object class (the simulator's segmentation) and predict its height
 above the bin floor (depth), all from the CNN's 32×10×10 bottleneck.
 
-    python recipes/collect_rollouts.py system=random splits=[train]    # the frames come from these rollouts
+    python recipes/collect.py what=rollouts system=random splits=[train]    # the frames come from these rollouts
     python recipes/pretrain_vqa_encoder.py
     python recipes/pretrain_vqa_encoder.py resume=true                 # continue a killed run
     python recipes/pretrain_vqa_encoder.py export_pack=runs/frames.xz  # the frames in one file (~21 kB each) ...
@@ -131,7 +131,7 @@ def pretrain(cfg: DictConfig) -> dict:
     config = OmegaConf.to_container(cfg, resolve=True)
     if not (out / "config.yaml").exists():
         write_atomic(out / "config.yaml", OmegaConf.to_yaml(OmegaConf.create(config)))
-    logger = RunLogger(out, wandb=cfg.logger.wandb, project=cfg.logger.project, exp_name="vqa_encoder", config=config)
+    logger = RunLogger(out, cfg.logger, exp_name="vqa_encoder", config=config)
     meta = {"dataset_sha256": source["dataset_sha256"], "classes": list(source["classes"]), "frames": len(frames),
             "stores": list(source["stores"])}
 

@@ -1,11 +1,11 @@
-"""Train the VQA's counting perception on labelled frames of fresh piles (recipes/collect_frames.py).
+"""Train the VQA's counting perception on labelled frames of fresh piles (recipes/collect.py what=frames).
 
-    python recipes/collect_frames.py                                  # the frames (pretraining-only dataset)
+    python recipes/collect.py what=frames                                  # the frames (pretraining-only dataset)
     python recipes/train_perception.py                                # ~90 min on 2 CPU cores
     python recipes/train_perception.py resume=true                    # continue a killed run
     python recipes/train_perception.py device=cuda train.batch_size=128 model.widths=[48,64,128,192]
     python recipes/train_perception.py model.image_size=224 train.crop=112 ...    # full resolution at 112-px cost
-                                                                      # (frames: collect_frames.py size=224)
+                                                                      # (frames: collect.py what=frames size=224)
 
 Selects by the counting rule itself, on whole held-out pretraining scenes: the share of (frame, class
 in the scene) pairs whose count (vote clusters or density, whichever is better) equals the number of
@@ -43,6 +43,7 @@ from mqa_rl.training.count_calibration import calibrate_counting, count_accuracy
 from mqa_rl.training.model_checkpoint import ModelCheckpoint
 from mqa_rl.training.resume_guard import RESUMABLE, refuse_changed_config
 from mqa_rl.training.run_dir import RunLock, positive_ints, refuse_unresumable
+from mqa_rl.training.perception_maps import perception_maps
 from mqa_rl.training.run_logger import RunLogger, trim_scalars
 from mqa_rl.training.signals import exit_on_sigterm
 from mqa_rl.training.vqa_data import scene_split
@@ -122,12 +123,12 @@ def _train(cfg: DictConfig, out: Path) -> dict:
     config = OmegaConf.to_container(cfg, resolve=True)
 
     if not cfg.frames.stores:
-        raise ValueError("frames.stores=[] names no frame store: give the folders recipes/collect_frames.py wrote, "
+        raise ValueError("frames.stores=[] names no frame store: give the folders recipes/collect.py what=frames wrote, "
                          "e.g. 'frames.stores=[runs/perception/frames]'")
     metas = [read_meta(s) for s in cfg.frames.stores]
     if cfg.model.depth and any(m.get("schema", 1) < DEPTH_SCHEMA for m in metas):
         raise ValueError(f"model.depth=true needs frames with depth images; {list(cfg.frames.stores)} were collected "
-                         f"without (an older collect_frames.py): collect them again into a new out_dir")
+                         f"without (an older collect.py what=frames): collect them again into a new out_dir")
     stores = list(cfg.frames.stores)
     index = load_frames(stores, (keys.SCENE, keys.LEVEL))     # the split first, then each side's images once
     sizes = {m["plan"]["size"] for m in metas}
@@ -135,7 +136,7 @@ def _train(cfg: DictConfig, out: Path) -> dict:
     if sizes != {want}:
         raise ValueError(f"the frames were rendered at {sorted(sizes)} px, the perception reads {want} px "
                          f"(model.image_size={cfg.model.image_size}, model.detail={cfg.model.detail}, model.backbone={cfg.model.backbone}): "
-                         f"collect frames at that size (collect_frames.py size={want}) or set model.image_size / "
+                         f"collect frames at that size (collect.py what=frames size={want}) or set model.image_size / "
                          f"model.detail / model.backbone")
     val_mask = scene_split(index, cfg.train.val_fraction, cfg.seed)
     if not val_mask.any():
@@ -195,7 +196,8 @@ def _train(cfg: DictConfig, out: Path) -> dict:
               f"(killed while calibrating): finishing them", flush=True)
         return finish(out, state, steps, val, device, n_train, baseline)
     write_atomic(out / "config.yaml", OmegaConf.to_yaml(OmegaConf.create(config)))
-    logger = RunLogger(out, wandb=cfg.logger.wandb, project=cfg.logger.project, exp_name="perception", config=config)
+    logger = RunLogger(out, cfg.logger, exp_name="perception", config=config)
+    shown = val[torch.linspace(0, val.shape[0] - 1, min(4, val.shape[0])).long()]     # the frames whose maps are logged
     meta = {"command": COMMAND, "frames": [{"store": str(s), "dataset_sha256": m["dataset"]["manifest_sha256"],
                                             "plan": m["plan"]} for s, m in zip(cfg.frames.stores, metas)],
             "train_frames": n_train, "val_frames": int(val.shape[0]), "config": config}
@@ -241,6 +243,7 @@ def _train(cfg: DictConfig, out: Path) -> dict:
                     save_perception(model, out / PERCEPTION_FILE,
                                     {**meta, "step": step, "val": metrics, "train_seconds": round(state["train_seconds"], 1)})
                 logger.log_metrics(metrics, step=step)
+                logger.log_image("val/perception_maps", perception_maps(model, shown, device), step=step)
                 bar.set_postfix(loss=f"{metrics['train/loss_class']:.3f}", votes=f"{metrics['val/count_accuracy']:.3f}",
                                 density=f"{metrics['val/density_count_accuracy']:.3f}")
             if step % cfg.checkpoint.interval_steps == 0 or step == steps:

@@ -7,7 +7,7 @@
     python recipes/train_vqa.py system=random vqa=counting encoder.freeze=false \
         init_from=checkpoints/vqa_counting/random train.lr=1e-4     # fine-tune a frozen head with its perception
 
-Reads ``${root}/rollouts/<questions>/<system>/train`` (recipes/collect_rollouts.py) and the counting perception
+Reads ``${root}/rollouts/<questions>/<system>/train`` (recipes/collect.py what=rollouts) and the counting perception
 (``perception.weights``) or, with vqa=eqa, the pretrained encoder (recipes/pretrain_vqa_encoder.py); writes to
 ``out_dir``: ``vqa.pt`` (the model with the best accuracy on held-out training scenes: what
 ``mqa_rl.modules.vqa.load_vqa`` and recipes/evaluate.py read), ``checkpoints/`` (atomic, for resume=true), ``csv/`` and ``wandb/`` logs (loss, accuracy,
@@ -97,7 +97,7 @@ def check_training_rollouts(meta: dict, rollouts: str) -> str:
     split = meta.get("plan", {}).get("split")
     if split != "train":
         raise ValueError(f"rollouts={rollouts} were collected on the {split!r} split: a VQA trains on the training "
-                         f"split's rollouts only (python recipes/collect_rollouts.py system=... 'splits=[train]')")
+                         f"split's rollouts only (python recipes/collect.py what=rollouts system=... 'splits=[train]')")
     return split
 
 
@@ -185,8 +185,7 @@ def _train(cfg: DictConfig, out: Path) -> dict:
           f"({'frozen encoder, features' if frozen else 'fine-tuned encoder'}: {feature_seconds:.0f} s)", flush=True)
 
     write_atomic(out / "config.yaml", OmegaConf.to_yaml(OmegaConf.create(config)))
-    logger = RunLogger(out, wandb=cfg.logger.wandb, project=cfg.logger.project,
-                       exp_name=f"vqa_{cfg.vqa.name}_{cfg.system}", config=config)
+    logger = RunLogger(out, cfg.logger, exp_name=f"vqa_{cfg.vqa.name}_{cfg.system}", config=config)
     vqa_meta = {"system": cfg.system, "questions": cfg.questions.name, "question_types": list(cfg.questions.types),
                 "rollouts": str(cfg.rollouts), "rollouts_split": split,
                 "dataset_sha256": meta["dataset"]["manifest_sha256"], "policy": meta["policy"],
@@ -228,7 +227,8 @@ def _train(cfg: DictConfig, out: Path) -> dict:
                         save_vqa(model, out / CHECKPOINT_NAME, {**vqa_meta, "step": step, "val": metrics})
                     stop = patience is not None and step - state["best_step"] >= patience
                 logger.log_metrics(metrics, step=step)
-                bar.set_postfix(loss=f"{metrics['train/loss']:.3f}", val=f"{metrics.get('val/accuracy', float('nan')):.3f}")
+                bar.set_postfix(loss=f"{metrics['train/loss']:.3f}",
+                                **({"val": f"{metrics['val/accuracy']:.3f}"} if "val/accuracy" in metrics else {}))
             if step % cfg.checkpoint.interval_steps == 0 or step == steps or stop:
                 ckpt.save(step)
             if stop:

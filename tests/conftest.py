@@ -102,9 +102,9 @@ def answering_root(small_dataset_dir, tmp_path_factory):
     overrides = [f"root={root}", f"dataset={small_dataset_dir}", "questions.max_per_group.train=2",
                  "questions.max_per_group.test=2", "collection.repeats.train=2", "collection.workers=1",
                  "collection.env.max_pushes=2"]
-    collect = load_recipe("collect_rollouts")
+    collect = load_recipe("collect")
     for system in ("random", "no_manipulation"):        # the env's 224-px frames only (vqa=eqa: no answer camera)
-        collect.collect(compose_recipe_config("collect_rollouts", [*overrides, f"system={system}", "vqa=eqa",
+        collect.collect(compose_recipe_config("collect", ["what=rollouts", *overrides, f"system={system}", "vqa=eqa",
                                                                    "progress=false"]))
     return root, overrides
 

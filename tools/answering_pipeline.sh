@@ -26,7 +26,7 @@ V=(vqa=eqa)                                             # the answering recipes'
 step "1/6 DQN(R_l), briefly"
 python recipes/train_dqn.py reward=local "out_dir=$ROOT/dqn_local" resume=true "${DQN[@]}"
 step "2/6 rollouts of $SYSTEMS"
-python recipes/collect_rollouts.py -m "${A[@]}" "${V[@]}" "system=$SYSTEMS"
+python recipes/collect.py what=rollouts -m "${A[@]}" "${V[@]}" "system=$SYSTEMS"
 step "3/6 VQA encoder pretraining"
 python recipes/pretrain_vqa_encoder.py "${A[@]}" resume=true "${PRETRAIN[@]}"
 step "4/6 a VQA per system"

@@ -35,7 +35,7 @@ for v in global local global_local; do
 done
 VQA=("vqa=${MQA_VQA:-eqa}")
 step "rollouts of random (the VQA encoder learns from their frames)"
-python recipes/collect_rollouts.py "${EXTRA[@]}" system=random "${VQA[@]}"
+python recipes/collect.py what=rollouts "${EXTRA[@]}" system=random "${VQA[@]}"
 ENCODER=checkpoints/vqa_encoder
 [ "${MQA_VQA:-eqa}" = classes ] && ENCODER=checkpoints/vqa_encoder_scenes
 ROOT=runs/answering
@@ -49,7 +49,7 @@ else
 fi
 SYSTEMS=random,no_manipulation,dqn_global,dqn_local,dqn_global_local,privileged,dqn_student
 step "rollouts of $SYSTEMS"
-python recipes/collect_rollouts.py -m "${EXTRA[@]}" "system=$SYSTEMS" "vqa=${MQA_VQA:-eqa}"   # random's: complete, skipped
+python recipes/collect.py what=rollouts -m "${EXTRA[@]}" "system=$SYSTEMS" "vqa=${MQA_VQA:-eqa}"   # random's: complete, skipped
 step "a VQA per system"
 python recipes/train_vqa.py -m "${EXTRA[@]}" "system=$SYSTEMS" resume=true "${VQA[@]}"
 step "Table III"

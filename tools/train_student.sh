@@ -69,7 +69,7 @@ step "demonstrations of the $TEACHER teacher: 2 x ${MQA_DEMO_STATES:-600} states
 pids=()
 for k in 0 1; do
   if [ ! -f "$ROOT/demos_$k/demos.json" ]; then
-    python recipes/collect_demonstrations.py "states=${MQA_DEMO_STATES:-600}" "seed=$(( 2 * SEED + k + 100 ))" \
+    python recipes/collect.py what=demonstrations "states=${MQA_DEMO_STATES:-600}" "seed=$(( 2 * SEED + k + 100 ))" \
       "teacher=${TEACHER}_teacher" progress=false \
       "out_dir=$ROOT/demos_$k" &
     pids+=($!)

@@ -48,7 +48,7 @@ def load_frames(stores, select=None, rows: torch.Tensor | None = None) -> Tensor
     offsets = pile_offsets(stores)
     for i, (store, mask) in enumerate(zip(stores, masks)):
         if counts[i] == 0:
-            raise ValueError(f"{store} holds no frames yet: run recipes/collect_frames.py")
+            raise ValueError(f"{store} holds no frames yet: run recipes/collect.py what=frames")
         td = load_records(store, select, require_complete=False, rows=mask)
         td.set(keys.SCENE, td.get(keys.SCENE) + offsets[i])
         if len(stores) == 1:

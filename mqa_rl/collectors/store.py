@@ -132,8 +132,8 @@ def chunk_paths(root: str | Path) -> list[Path]:
 def read_meta(root: str | Path) -> dict:
     path = Path(root) / META
     if not path.exists():
-        raise FileNotFoundError(f"no collection at {root} (no {META}): collect it first (recipes/collect_rollouts.py "
-                                f"for a system's rollouts, recipes/collect_frames.py for the perception's frames)")
+        raise FileNotFoundError(f"no collection at {root} (no {META}): collect it first (recipes/collect.py what=rollouts "
+                                f"for a system's rollouts, recipes/collect.py what=frames for the perception's frames)")
     try:
         return json.loads(path.read_text())
     except (UnicodeDecodeError, json.JSONDecodeError) as error:

@@ -142,7 +142,7 @@ class PolicyRegistry:
         if critic.reading is not None and critic.reading.input_size > self._frames:
             self.passed_over.append((label, f"its stop reads the counting perception on a {critic.reading.input_size}-px "
                                             f"frame of every state, which this demo does not render (it would slow every "
-                                            f"push): roll it out with recipes/evaluate_policy.py or collect_rollouts.py"))
+                                            f"push): roll it out with recipes/evaluate_policy.py or collect.py what=rollouts"))
             return
         wanted = meta.get("policy_fingerprint")
         found = False

@@ -10,7 +10,7 @@ target: the push starts just behind the occluder's visible part on the target's 
 through it. When every target is revealed (or nothing covers the hidden ones, or every
 occluder was already pushed ``max_tries_per_occluder`` times without success) it stops.
 ``order="visible_first"`` serves the partly visible targets first (most visible first), then the
-hidden ones: a teacher whose choices an image policy can see (``recipes/collect_demonstrations.py``).
+hidden ones: a teacher whose choices an image policy can see (``recipes/collect.py what=demonstrations``).
 ``geometry="visible"`` goes further: only targets the image shows a part of are served, the occluders are
 the objects whose visible pixels border the target's visible pixels and stand higher there (depth), and the
 push direction runs from the target's visible centroid to the occluder's: every input of the choice is in the

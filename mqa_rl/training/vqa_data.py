@@ -53,7 +53,7 @@ def frame_keys(store: str | Path, size: int | None) -> tuple:
     if int(size) > int(env.get("image_size", size)):
         held = f"{env['image_size']} px" + (f" and {env['answer_size']}-px answer frames" if env.get("answer_size") else "")
         raise ValueError(f"the VQA reads {size}-px frames; the rollouts in {store} hold {held}: collect them with "
-                         f"collection.env.answer_size={size} (python recipes/collect_rollouts.py ... "
+                         f"collection.env.answer_size={size} (python recipes/collect.py what=rollouts ... "
                          f"collection.env.answer_size={size} overwrite=true)")
     return IMAGE_KEYS
 
@@ -258,7 +258,7 @@ def pretraining_frames(stores, dataset, *, max_frames: int | None = None, seed: 
                 if n > 0:
                     picks.append((path, keys.LAST, row, scene, level, ds, offset))
     if not picks:
-        raise ValueError(f"no frames in {list(stores)}: collect rollouts first (recipes/collect_rollouts.py)")
+        raise ValueError(f"no frames in {list(stores)}: collect rollouts first (recipes/collect.py what=rollouts)")
     if max_frames is not None and len(picks) > max_frames:
         keep = np.random.default_rng(seed).choice(len(picks), size=max_frames, replace=False)
         picks = [picks[i] for i in sorted(keep)]

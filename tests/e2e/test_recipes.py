@@ -15,7 +15,7 @@ def _run(*args, cwd):
 
 
 @pytest.mark.timeout(900)
-def test_make_dataset_then_random_episodes(tmp_path):
+def test_make_dataset_then_a_few_random_episodes(tmp_path):
     ds = tmp_path / "mqa"
     text = _run(str(ROOT / "recipes" / "make_dataset.py"), f"dataset.out_dir={ds}",
                 "dataset.num_scenes={easy: 1, medium: 0, hard: 1}", f"plot={tmp_path / 'stats.png'}", cwd=tmp_path)
@@ -29,7 +29,7 @@ def test_make_dataset_then_random_episodes(tmp_path):
     _run(str(ROOT / "recipes" / "make_dataset.py"), f"dataset.out_dir={ds}", "dataset.overwrite=true",
          "dataset.num_scenes={easy: 1, medium: 0, hard: 1}", f"plot={tmp_path / 's3.png'}", cwd=tmp_path)
     out_dir = tmp_path / "episodes"
-    text = _run(str(ROOT / "recipes" / "random_episodes.py"), f"dataset={ds}", "episodes=1", "env.difficulties=[easy]",
+    text = _run(str(ROOT / "recipes" / "collect.py"), "what=episodes", f"dataset={ds}", "episodes=1", "env.difficulties=[easy]",
                 "video_format=gif", f"out_dir={out_dir}", "reward=local", "reward.question_weights.local_occlusion=0.7",
                 cwd=tmp_path)
     assert "episode 0:" in text and "reward" in text and "'local_occlusion': 0.7" in text

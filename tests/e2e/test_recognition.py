@@ -205,7 +205,7 @@ def test_pretrain_then_train_dqn_from_the_recognition_file(small_dataset_dir, tm
     args = [str(ROOT / "recipes" / "pretrain_push_trunk.py"), f"dataset={small_dataset_dir}", f"out_dir={rec}",
             "frames.count=24", "frames.max_pushes=3", "train.steps=4", "train.eval_interval=2", "train.batch_size=4",
             "question.steps=300",
-            "logger.wandb=false", "logger.progress=false", "threads=1"]
+            "logger=csv", "logger.progress=false", "threads=1"]
     out = subprocess.run([sys.executable, *args], capture_output=True, text=True, timeout=600, env=ENV, cwd=tmp_path)
     assert out.returncode == 0, out.stderr[-3000:]
     assert "collected 24 frames" in out.stdout and (rec / "recognition.pt").exists()
@@ -215,7 +215,7 @@ def test_pretrain_then_train_dqn_from_the_recognition_file(small_dataset_dir, tm
     assert again.returncode == 0 and "collected" not in again.stdout       # the cached frames are reused
     blob = torch.load(rec / "recognition.pt", weights_only=True)
     demos = tmp_path / "demos"                                  # and the oracle's demonstrations (DQfD)
-    out = subprocess.run([sys.executable, str(ROOT / "recipes" / "collect_demonstrations.py"), f"dataset={small_dataset_dir}",
+    out = subprocess.run([sys.executable, str(ROOT / "recipes" / "collect.py"), "what=demonstrations", f"dataset={small_dataset_dir}",
                           f"out_dir={demos}", "states=6", "progress=false", "env.max_pushes=3"],
                          capture_output=True, text=True, timeout=600, env=ENV, cwd=tmp_path)
     assert out.returncode == 0 and "6 demonstrations" in out.stdout, out.stderr[-3000:]

@@ -75,7 +75,7 @@ def trained(answering_root):
     for system in ("random", "no_manipulation"):
         train_vqa.train(compose_recipe_config("train_vqa", [
             *overrides, f"system={system}", "encoder.weights=null", "encoder.freeze=false", "train.steps=3", "train.batch_size=4",
-            "train.eval_interval=3", "logger.wandb=false", "logger.progress=false", "vqa=eqa"]))
+            "train.eval_interval=3", "logger=csv", "logger.progress=false", "vqa=eqa"]))
     return root, [*overrides, "vqa=eqa"]              # the paper's VQA: a tiny one trains in seconds
 
 
@@ -153,7 +153,7 @@ def test_evaluate_answers_with_the_mean_of_several_vqa_seeds(small_dataset, trai
     root, overrides = trained
     load_recipe("train_vqa").train(compose_recipe_config("train_vqa", [
         *overrides, "system=random", "encoder.weights=null", "encoder.freeze=false", "train.steps=3", "train.batch_size=4",
-        "train.eval_interval=3", "logger.wandb=false", "logger.progress=false", "seed=1", f"out_dir={root / 'vqa_s1' / 'random'}"]))
+        "train.eval_interval=3", "logger=csv", "logger.progress=false", "seed=1", f"out_dir={root / 'vqa_s1' / 'random'}"]))
     dirs = [root / "vqa" / "counting-eqa", root / "vqa_s1"]
     results = load_recipe("evaluate").evaluate(compose_recipe_config("evaluate", [
         *overrides, "progress=false", "report=[random]", f"vqa_dir=[{dirs[0]},{dirs[1]}]", f"out_dir={root / 'report_ens'}"]))

@@ -90,7 +90,7 @@ def test_oracle_demonstrations_are_collected_and_refused_when_they_do_not_fit(sm
     assert demos[keys.DEPTH].dtype == torch.float16 and demos[keys.RGB].dtype == torch.uint8
     pushes = demos[keys.ACTION][demos[keys.ACTION] != actions.STOP]
     assert len(pushes) >= 3                                  # hard scenes: the oracle pushes occluders away
-    with pytest.raises(FileNotFoundError, match="collect_demonstrations.py"):
+    with pytest.raises(FileNotFoundError, match="collect.py what=demonstrations"):
         load_demonstrations(tmp_path / "none")
     folder = tmp_path / "demos"
     demos.memmap(folder / "data")

@@ -2,6 +2,7 @@
 
 from types import SimpleNamespace
 
+import cv2
 import pytest
 import torch
 from tensordict import TensorDict
@@ -263,7 +264,7 @@ def test_a_pretraining_set_sharing_a_scene_with_the_test_split_is_refused():
 
 
 def test_a_finer_render_sees_the_same_rest_pile_and_keeps_areas_in_224_px_units(small_dataset):
-    """collect_frames render=448: the same rest pile as the env's 224-px render, its object map twice as fine and
+    """collect.py what=frames render=448: the same rest pile as the env's 224-px render, its object map twice as fine and
     each object's visible area counted in 224-px pixels (the counting rule's), within the resampling."""
     from mqa_rl.collectors.perception_frames import collect_perception_frames, pile_episode, scene_questions
     from mqa_rl.envs.sapien_bin import SapienBinEnv
@@ -285,17 +286,17 @@ def test_a_finer_render_sees_the_same_rest_pile_and_keeps_areas_in_224_px_units(
 
 
 def test_frames_perception_and_counting_vqa_recipes_end_to_end(small_dataset, sparse_dataset, answering_root, tmp_path):
-    """collect_frames (resumable, refuses the test split's piles) → train_perception (resumes, refuses
+    """collect.py what=frames (resumable, refuses the test split's piles) → train_perception (resumes, refuses
     changed settings) → train_vqa vqa=counting → load_vqa answers."""
     from conftest import compose_recipe_config, load_recipe
 
     root, overrides = answering_root
-    quiet = ["logger.wandb=false", "logger.progress=false"]
+    quiet = ["logger=csv", "logger.progress=false"]
     frames = tmp_path / "frames"
-    collect = load_recipe("collect_frames")
+    collect = load_recipe("collect")
     args = [f"dataset={small_dataset.root}", f"out_dir={frames}", "episodes_per_scene=1", "pushes=1", "workers=1",
             "chunk_episodes=2", f"protected=[{{dataset: {sparse_dataset.root}, split: null}}]"]
-    collect.main.__wrapped__(compose_recipe_config("collect_frames", args))
+    collect.main.__wrapped__(compose_recipe_config("collect", args))
     records = load_records(frames)
     n = len(small_dataset.scenes)
     assert records.shape[0] == 2 * n and records.get(keys.RGB).shape[-1] == 112
@@ -306,7 +307,7 @@ def test_frames_perception_and_counting_vqa_recipes_end_to_end(small_dataset, sp
     assert ((records.get(keys.OBJECT_CLASSES) > 0).sum(-1) == sizes).all()
     assert ((records.get(keys.FRAME_VISIBLE) > 0).sum(-1) <= sizes).all()
     with pytest.raises(ValueError, match="same pile"):
-        collect.main.__wrapped__(compose_recipe_config("collect_frames", [
+        collect.main.__wrapped__(compose_recipe_config("collect", ["what=frames",
             f"dataset={small_dataset.root}", f"out_dir={tmp_path / 'leak'}", "workers=1",
             f"protected=[{{dataset: {small_dataset.root}, split: test}}]"]))
     assert not (tmp_path / "leak").exists()
@@ -324,6 +325,10 @@ def test_frames_perception_and_counting_vqa_recipes_end_to_end(small_dataset, sp
     assert not (out / "checkpoints").exists()
     first = train.train(compose_recipe_config("train_perception", [*targs, "train.steps=2"]))
     assert first["steps"] == 2 and (out / "perception.pt").exists()
+    maps = sorted((out / "media").glob("val_perception_maps_*.png"))  # render | classes | density of the held-out frames
+    assert [m.name for m in maps] == ["val_perception_maps_0000002.png"]
+    shown = cv2.imread(str(maps[0]))
+    assert shown.shape[1] == 3 * shown.shape[0] // min(4, int(first["val_frames"])) and shown.std() > 0
     with pytest.raises(FileExistsError, match="resume=true"):
         train.train(compose_recipe_config("train_perception", [*targs, "train.steps=2"]))
     with pytest.raises(ValueError, match="train.lr"):

@@ -152,7 +152,7 @@ def _steps(run, name):
 
 def test_pretrain_and_train_vqa_recipes_write_log_and_resume(small_dataset, answering_root):
     root, overrides = answering_root
-    quiet = ["logger.wandb=false", "logger.progress=false"]
+    quiet = ["logger=csv", "logger.progress=false"]
     pretrain = load_recipe("pretrain_vqa_encoder")
     summary = pretrain.pretrain(compose_recipe_config("pretrain_vqa_encoder", [
         *overrides, *quiet, "train.steps=2", "train.batch_size=2", "train.eval_interval=1", "frames.max_frames=8"]))
@@ -194,7 +194,7 @@ def test_train_vqa_refuses_test_rollouts_bad_sizes_changed_resumes_dead_runs_and
 
     root, overrides = answering_root
     train_vqa = load_recipe("train_vqa")
-    args = [*overrides, "logger.wandb=false", "logger.progress=false", "system=random", "vqa=eqa", "encoder.weights=null",
+    args = [*overrides, "logger=csv", "logger.progress=false", "system=random", "vqa=eqa", "encoder.weights=null",
             "encoder.freeze=false", "train.batch_size=4", "train.eval_interval=2", "checkpoint.interval_steps=2",
             "train.val_fraction=0"]
     bad = tmp_path / "bad"
@@ -240,7 +240,7 @@ def test_train_vqa_keeps_the_checkpoint_its_validation_metric_picks(small_datase
     train_vqa = load_recipe("train_vqa")
     # the tiny pipeline has one training scene per level, too few to hold one out: hold out every other episode
     monkeypatch.setattr(train_vqa, "scene_split", lambda records, fraction, seed: torch.arange(records.shape[0]) % 2 == 1)
-    args = [*overrides, "logger.wandb=false", "logger.progress=false", "system=random", "vqa=eqa", "encoder.weights=null",
+    args = [*overrides, "logger=csv", "logger.progress=false", "system=random", "vqa=eqa", "encoder.weights=null",
             "encoder.freeze=false", "train.batch_size=4", "train.eval_interval=1", "train.steps=6", "train.lr=0.05"]
     for select in ("loss", "accuracy"):
         out = tmp_path / select
@@ -267,7 +267,7 @@ def test_train_vqa_keeps_the_checkpoint_its_validation_metric_picks(small_datase
 
 def test_frame_pack_carries_the_frames_losslessly_and_pretrains_without_the_dataset(small_dataset, answering_root, tmp_path):
     root, overrides = answering_root
-    quiet = ["logger.wandb=false", "logger.progress=false"]
+    quiet = ["logger=csv", "logger.progress=false"]
     pretrain = load_recipe("pretrain_vqa_encoder")
     pack = tmp_path / "frames.xz"
     pretrain.export_pack(compose_recipe_config("pretrain_vqa_encoder", [*overrides, f"export_pack={pack}",
@@ -336,8 +336,8 @@ def test_pretraining_frames_mix_stores_of_another_dataset_of_the_same_objects(sm
     root, _ = answering_root
     main_store = root / "rollouts" / "counting" / "no_manipulation" / "train"
     other = tmp_path / "other"
-    collect = load_recipe("collect_rollouts")
-    collect.collect(compose_recipe_config("collect_rollouts", [
+    collect = load_recipe("collect")
+    collect.collect(compose_recipe_config("collect", ["what=rollouts",
         f"root={other}", f"dataset={sparse_dataset.root}", "system=no_manipulation", "splits=[train]",
         "questions.max_per_group.train=1", "collection.workers=1", "progress=false"]))
     other_store = other / "rollouts" / "counting" / "no_manipulation" / "train"
@@ -410,6 +410,6 @@ def test_grounding_loss_teaches_the_classes_pool_which_class_a_question_names(sm
     train_vqa = load_recipe("train_vqa")
     out = tmp_path / "vqa"
     train_vqa.train(compose_recipe_config("train_vqa", [
-        *overrides, "logger.wandb=false", "logger.progress=false", "system=random", "vqa=classes", f"out_dir={out}",
+        *overrides, "logger=csv", "logger.progress=false", "system=random", "vqa=classes", f"out_dir={out}",
         f"encoder.weights={encoder}", "train.steps=2", "train.batch_size=4", "train.eval_interval=2", "train.augment=false"]))
     assert _steps(out, "train/grounding_accuracy") == [2]

@@ -10,12 +10,13 @@ from mqa_rl.modules.systems import system_spec, systems_by_id, table3_systems
 MAIN_JOB = ("no_manipulation", "random", "dqn_countable_budget_kept", "privileged")     # tools/main.sh
 
 
-@pytest.mark.parametrize("recipe", ["collect_rollouts", "train_vqa", "evaluate", "pretrain_vqa_encoder",
-                                    "evaluate_policy", "demo"])
+@pytest.mark.parametrize("recipe", ["collect what=rollouts", "collect what=demonstrations", "train_vqa", "evaluate",
+                                    "pretrain_vqa_encoder", "evaluate_policy", "demo"])
 def test_every_recipe_reads_the_one_registry(recipe):
     from omegaconf import OmegaConf
 
-    assert OmegaConf.to_container(compose_recipe_config(recipe, []).systems) == system_registry()
+    name, *overrides = recipe.split()
+    assert OmegaConf.to_container(compose_recipe_config(name, overrides).systems) == system_registry()
 
 
 def test_every_entry_is_a_policy_spec_and_the_main_jobs_ids_are_there():
@@ -61,16 +62,16 @@ def test_evaluate_policy_takes_a_dqn_system_as_its_greedy_policy():
 def test_the_default_answering_vqa_is_the_counting_one_and_its_rollouts_carry_its_answer_camera():
     assert compose_recipe_config("train_vqa", []).vqa.name == "counting"
     assert compose_recipe_config("evaluate", []).vqa.name == "counting"
-    assert compose_recipe_config("collect_rollouts", []).collection.env.answer_size == 448
-    assert compose_recipe_config("collect_rollouts", ["vqa=eqa"]).collection.env.answer_size is None
+    assert compose_recipe_config("collect", ["what=rollouts"]).collection.env.answer_size == 448
+    assert compose_recipe_config("collect", ["what=rollouts", "vqa=eqa"]).collection.env.answer_size is None
     assert compose_recipe_config("train_vqa", ["vqa=eqa"]).out_dir.endswith("counting-eqa/random")
 
 
 def test_collect_demonstrations_takes_its_teacher_from_the_registry():
     """teacher=<id>: the options its demonstrations record, every one filled (the image teacher's are the values the
     recipe's own oracle block held before the registry); an oracle.<option> overrides the teacher's."""
-    teacher_options = load_recipe("collect_demonstrations").teacher_options
-    compose = lambda *o: teacher_options(compose_recipe_config("collect_demonstrations", list(o)))    # noqa: E731
+    teacher_options = load_recipe("collect").teacher_options
+    compose = lambda *o: teacher_options(compose_recipe_config("collect", ["what=demonstrations", *o]))    # noqa: E731
     image = {"lookahead": 1, "min_visible_px": 20, "min_visible_fraction": 0.3, "order": "visible_first",
              "geometry": "visible", "refine_radius": 0, "require_gain": False, "max_tries_per_occluder": 2}
     assert compose() == image
