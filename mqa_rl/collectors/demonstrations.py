@@ -11,6 +11,10 @@ action per state rather than with a few noisy rewards per episode. They feed a l
 from __future__ import annotations
 
 import json
+import os
+import shutil
+import time
+from collections import Counter
 from pathlib import Path
 
 import torch
@@ -19,12 +23,13 @@ from tensordict import TensorDict
 from mqa_rl import keys
 from mqa_rl.collectors.replay import OBS_KEYS
 from mqa_rl.data.dataset import dataset_fingerprint
+from mqa_rl.envs import actions
 from mqa_rl.files import load_memmap
 from mqa_rl.modules.privileged_policy import PrivilegedPushPolicy
 from mqa_rl.progress import Progress
 
 DEMO_KEYS = (*OBS_KEYS, keys.TARGET_CELLS, keys.ACTION)
-DEMOS_META = "demos.json"            # beside the memmap folder "data": written last (recipes/collect_demonstrations.py)
+DEMOS_META = "demos.json"            # beside the memmap folder "data": written last (recipes/collect.py what=demonstrations)
 
 
 def collect_demonstrations(env, states: int, *, progress: bool = True, **oracle_options) -> TensorDict:
@@ -52,6 +57,35 @@ def collect_demonstrations(env, states: int, *, progress: bool = True, **oracle_
     return torch.stack(out)
 
 
+def write_demonstration_set(out_dir, env, states: int, oracle: dict, settings: dict, *, progress: bool = True) -> dict:
+    """``states`` demonstrations of the teacher ``oracle`` (its options) on ``env`` as a folder: ``out_dir/data`` (a
+    memmap TensorDict) and ``out_dir/demos.json`` (``settings``, the teacher's options, the dataset's fingerprint,
+    action statistics), both renamed into place at the end: a killed run leaves nothing half-written. Returns the meta."""
+    out = Path(out_dir)
+    if (out / DEMOS_META).exists():
+        raise FileExistsError(f"{out} already holds demonstrations: choose another out_dir or delete it")
+    t0 = time.perf_counter()
+    demos = collect_demonstrations(env, states, progress=progress, **oracle)
+    seconds = time.perf_counter() - t0
+    act = demos.get(keys.ACTION)
+    allowed = demos.get(keys.ACTION_MASK).gather(-1, act[:, None]).squeeze(-1)
+    meta = {**settings, "oracle": oracle, "dataset_sha256": dataset_fingerprint(env.dataset.root),
+            "seconds": round(seconds, 1), "stop_fraction": float((act == actions.STOP).float().mean()),
+            "masked_fraction": float((~allowed).float().mean()),
+            "directions": dict(Counter((act[act != actions.STOP] // (actions.GRID ** 2)).tolist()))}
+    tmp = out.with_name(f".{out.name}.tmp{os.getpid()}")
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    demos.memmap(tmp / "data")
+    (tmp / DEMOS_META).write_text(json.dumps(meta, indent=1))
+    if out.exists():                       # an empty or unfinished folder (no demos.json)
+        shutil.rmtree(out)
+    os.replace(tmp, out)
+    print(f"{len(demos)} demonstrations in {seconds:.0f} s -> {out}: stop {meta['stop_fraction']:.2f}, "
+          f"masked {meta['masked_fraction']:.3f}")
+    return meta
+
+
 def load_demonstrations(path, dataset_root: str | Path | None = None) -> TensorDict:
     """The demonstrations in memory; clear errors for a missing, unfinished or other-dataset folder.
     A list of folders is concatenated (the students' two collection processes)."""
@@ -61,7 +95,7 @@ def load_demonstrations(path, dataset_root: str | Path | None = None) -> TensorD
             raise ValueError("demos.path is an empty list: give one or more demonstration folders")
         return torch.cat([p.select(*DEMO_KEYS) for p in parts])
     path = Path(path)
-    hint = "collect them with `python recipes/collect_demonstrations.py` (or set demos.path=null)"
+    hint = "collect them with `python recipes/collect.py what=demonstrations` (or set demos.path=null)"
     if not (path / DEMOS_META).exists():
         raise FileNotFoundError(f"no demonstrations in {path} ({DEMOS_META} missing): {hint}")
     meta = json.loads((path / DEMOS_META).read_text())

@@ -1,18 +1,13 @@
-"""Run a few episodes of the random baseline on SapienBinEnv; write a video per episode next to a
-printed log (question, pushes, what each push changed).
-
-    python recipes/random_episodes.py episodes=3 env.difficulties=[hard] video_format=gif
-    python recipes/random_episodes.py reward=local reward.simple_threshold=0.1
-"""
+"""A few episodes of the random baseline for people to look at: a video per episode (each push drawn as an arrow)
+and a log of what every push changed (objects moved, the targets' hidden fraction χ, the reward and its terms);
+``python recipes/collect.py what=episodes``."""
 
 from __future__ import annotations
 
 import time
 from pathlib import Path
 
-import hydra
 import torch
-from omegaconf import DictConfig, OmegaConf
 
 from mqa_rl import keys
 from mqa_rl.envs import actions
@@ -43,29 +38,31 @@ def describe_step(t: int, td) -> str:
     return f"  step {t}: {what:<62} moved {int(moved.sum()):2d} objects; {overlap}\n           {reward}"
 
 
-@hydra.main(config_path="conf", config_name="random_episodes", version_base="1.3")
-def main(cfg: DictConfig) -> None:
-    out = Path(cfg.out_dir)
+def random_episodes(out_dir, dataset, reward: dict, env_options: dict, *, episodes: int, seed: int,
+                    video_format: str = "mp4") -> str:
+    """``episodes`` episodes of the random baseline on ``dataset`` with the reward stack ``reward``: a video each
+    (``out_dir/episode_<i>.<video_format>``) and their log (``out_dir/episodes.log``, also returned)."""
+    out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    env = make_mqa_env(cfg.dataset, cfg.reward, seed=cfg.seed, **OmegaConf.to_container(cfg.env))
-    policy = RandomMQAPolicy(cfg.env.max_pushes, seed=cfg.seed)
+    env = make_mqa_env(dataset, reward, seed=seed, **env_options)
+    max_pushes = int(env_options.get("max_pushes", 10))
+    policy = RandomMQAPolicy(max_pushes, seed=seed)
     base = env.base_env
     lines = []
-    for ep in range(cfg.episodes):
-        t0 = time.perf_counter()
-        with torch.no_grad():
-            r = env.rollout(cfg.env.max_pushes + 1, policy)
-        q = base.question
-        lines.append(f"episode {ep}: {q.id} ({base.dataset.scene(q.scene_id).difficulty}) "
-                     f"\"{q.text}\" answer {q.answer}; {r.shape[0]} steps in {time.perf_counter() - t0:.1f} s")
-        lines += [describe_step(t, r[t]) for t in range(r.shape[0])]
-        video = write_video(episode_frames(r, base.camera, q.text), out / f"episode_{ep}.{cfg.video_format}")
-        lines.append(f"  video: {video}")
-    lines.append(f"reward variant: {cfg.reward.get('name', 'custom')} {OmegaConf.to_container(cfg.reward)}")
+    try:
+        for ep in range(episodes):
+            t0 = time.perf_counter()
+            with torch.no_grad():
+                r = env.rollout(max_pushes + 1, policy)
+            q = base.question
+            lines.append(f"episode {ep}: {q.id} ({base.dataset.scene(q.scene_id).difficulty}) "
+                         f"\"{q.text}\" answer {q.answer}; {r.shape[0]} steps in {time.perf_counter() - t0:.1f} s")
+            lines += [describe_step(t, r[t]) for t in range(r.shape[0])]
+            video = write_video(episode_frames(r, base.camera, q.text), out / f"episode_{ep}.{video_format}")
+            lines.append(f"  video: {video}")
+    finally:
+        env.close()
+    lines.append(f"reward variant: {reward.get('name', 'custom')} {reward}")
     text = "\n".join(lines)
     (out / "episodes.log").write_text(text + "\n")
-    print(text)
-
-
-if __name__ == "__main__":
-    main()
+    return text
