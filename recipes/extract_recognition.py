@@ -1,5 +1,5 @@
 """Write a trained push policy's recognition (rgb trunk, class head, question encoder and its class
-attention) as a recognition file, the format ``recipes/pretrain_push_trunk.py`` writes.
+attention) as a recognition file, the format ``recipes/pretrain.py part=push_trunk`` writes.
 
     python recipes/extract_recognition.py run=checkpoints/dqn_geometric_student out=runs/recognition/recognition.pt
 

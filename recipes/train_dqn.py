@@ -226,7 +226,7 @@ def _train(cfg: DictConfig, out: Path, created: bool) -> dict:
     classes = eval_env.base_env.dataset.classes
     net = make_push_qnet(cfg.model, vocab_size=vocab, camera_distance=eval_env.base_env.camera.distance,
                          num_classes=len(classes))
-    if cfg.model.get("pretrained"):              # recognition learnt from the segmentation (pretrain_push_trunk.py)
+    if cfg.model.get("pretrained"):              # recognition learnt from the segmentation (pretrain.py part=push_trunk)
         meta = load_recognition(net, cfg.model.pretrained, classes, freeze=cfg.model.get("pretrained_frozen", True))
         print(f"recognition from {cfg.model.pretrained}: {meta}")
     net = net.to(device)

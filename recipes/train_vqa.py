@@ -8,7 +8,7 @@
         init_from=checkpoints/vqa_counting/random train.lr=1e-4     # fine-tune a frozen head with its perception
 
 Reads ``${root}/rollouts/<questions>/<system>/train`` (recipes/collect.py what=rollouts) and the counting perception
-(``perception.weights``) or, with vqa=eqa, the pretrained encoder (recipes/pretrain_vqa_encoder.py); writes to
+(``perception.weights``) or, with vqa=eqa, the pretrained encoder (recipes/pretrain.py part=vqa_encoder); writes to
 ``out_dir``: ``vqa.pt`` (the model with the best accuracy on held-out training scenes: what
 ``mqa_rl.modules.vqa.load_vqa`` and recipes/evaluate.py read), ``checkpoints/`` (atomic, for resume=true), ``csv/`` and ``wandb/`` logs (loss, accuracy,
 validation accuracy per level), ``config.yaml`` and ``summary.json``.

@@ -25,6 +25,6 @@ step "random rollouts on it -> runs/pretrain_s1"
 python recipes/collect.py what=rollouts root=runs/pretrain_s1 "dataset=$EXTRA" system=random vqa=eqa \
   'questions.max_per_group={train: 500, test: 200}' collection.repeats.train=1 progress=false   # the env's frames only
 step "the encoder -> $OUT"
-python recipes/pretrain_vqa_encoder.py "out_dir=$OUT" encoder.head_width=64 frames.max_frames=7000 resume=true \
+python recipes/pretrain.py part=vqa_encoder "out_dir=$OUT" encoder.head_width=64 frames.max_frames=7000 resume=true \
   "frames.stores=[$MAIN,runs/pretrain_s1/rollouts/counting/random/train,runs/pretrain_s1/rollouts/counting/random/test]"
 step "done: $OUT/encoder.pt"

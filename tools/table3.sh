@@ -45,7 +45,7 @@ if [ -z "${MQA_TRAIN:-}" ] && [ -f "$ENCODER/encoder.pt" ] && [ ! -d "$ROOT/enco
   VQA+=("encoder.weights=$ENCODER/encoder.pt")
 else
   step "VQA encoder pretraining"
-  python recipes/pretrain_vqa_encoder.py "${EXTRA[@]}" resume=true
+  python recipes/pretrain.py part=vqa_encoder "${EXTRA[@]}" resume=true
 fi
 SYSTEMS=random,no_manipulation,dqn_global,dqn_local,dqn_global_local,privileged,dqn_student
 step "rollouts of $SYSTEMS"

@@ -353,7 +353,7 @@ class SapienBinEnv(EnvBase):
     def class_cells(self) -> np.ndarray:
         """[1 + classes, GRID, GRID]: fraction of each action-grid cell's pixels showing each object class
         (channel 1 + ``dataset.classes.index(name)``; channel 0: no object, i.e. bin or floor) in the last
-        observation. The simulator's segmentation: a pretraining signal (``recipes/pretrain_push_trunk.py``),
+        observation. The simulator's segmentation: a pretraining signal (``recipes/pretrain.py part=push_trunk``),
         never a policy input."""
         if self.world is None:
             raise RuntimeError("call reset() before class_cells()")

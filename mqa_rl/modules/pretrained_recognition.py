@@ -1,7 +1,7 @@
 """The push Q-network's pretrained recognition as a file: the rgb trunk and class head (what is
 where) and the question encoder with its attention over the classes (what is asked about).
 
-``recipes/pretrain_push_trunk.py`` writes it; ``recipes/train_dqn.py`` loads it into a fresh
+``recipes/pretrain.py part=push_trunk`` writes it; ``recipes/train_dqn.py`` loads it into a fresh
 ``PushQNet`` (``model.pretrained=<file>``) before DQN training: the visual part frozen by default
 (``freeze``), the question part always trainable (the Q head reads its feature too). A trained DQN
 checkpoint holds these weights itself: evaluating or demoing it never needs this file.
@@ -17,7 +17,7 @@ RECOGNITION_FORMAT = "mqa_rl.push_recognition"
 RECOGNITION_VERSION = 1
 VISUAL = ("rgb_trunk", "class_head")
 QUESTION = ("question", "question_classes")
-HINT = "make one with `python recipes/pretrain_push_trunk.py` (or set model.pretrained=null)"
+HINT = "make one with `python recipes/pretrain.py part=push_trunk` (or set model.pretrained=null)"
 
 
 def _architecture(net) -> dict:

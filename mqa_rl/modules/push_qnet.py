@@ -24,7 +24,7 @@ the first head layer, after a 1×1 reduction) before the final 1×1 layers (a pu
 1×1 heads only see their own cell), ``coords`` two channels of grid coordinates (where the walls
 are), ``light_downsample`` (the light trunk on a 2×2-averaged image).
 
-``class_map`` (recognition made explicit; pretrain it with ``recipes/pretrain_push_trunk.py``): a 1×1
+``class_map`` (recognition made explicit; pretrain it with ``recipes/pretrain.py part=push_trunk``): a 1×1
 ``class_head`` on the rgb trunk gives per-cell class probabilities p [B, 1 + classes, 28, 28] (channel 0:
 no object), the question gives an attention w over the classes (softmax of a linear map of its
 feature), and the map of the question's targets, t = Σ_c w_c p_c, joins the state as one more channel.

@@ -20,7 +20,7 @@ bottleneck is too coarse to count: with the true class areas per cell, a VQA ans
 (docs/notebook/answering.md, "What limits counting").
 
 An encoder file (``save_encoder`` / ``load_encoder``) holds the encoder's weights and what it was
-trained on; ``recipes/pretrain_vqa_encoder.py`` writes it and ``recipes/train_vqa.py`` loads it
+trained on; ``recipes/pretrain.py part=vqa_encoder`` writes it and ``recipes/train_vqa.py`` loads it
 (frozen or fine-tuned).
 """
 
@@ -163,7 +163,7 @@ def save_encoder(encoder: FrameEncoder, path: str | Path, meta: dict) -> Path:
 def load_encoder(path: str | Path) -> tuple[FrameEncoder, dict]:
     """(encoder, meta) from ``save_encoder``'s file. FileNotFoundError / ValueError say what to do."""
     path = Path(path)
-    hint = "make one with `python recipes/pretrain_vqa_encoder.py` (or set vqa.encoder.weights=null to train from scratch)"
+    hint = "make one with `python recipes/pretrain.py part=vqa_encoder` (or set vqa.encoder.weights=null to train from scratch)"
     if not path.is_file():
         raise FileNotFoundError(f"no VQA encoder file at {path}: {hint}")
     try:

@@ -1,7 +1,7 @@
 """A frame pack: the encoder's pretraining frames in one self-describing, lossless, compressed file.
 
 Rendering needs the simulator (CPU); pretraining wants a GPU. A pack carries the frames from one
-machine to the other: ``recipes/pretrain_vqa_encoder.py export_pack=frames.xz`` writes it from the
+machine to the other: ``recipes/pretrain.py part=vqa_encoder export_pack=frames.xz`` writes it from the
 rollout stores, ``frames.pack=frames.xz`` trains from it on a machine that has neither the stores nor
 the dataset (the pack holds what the recipe reads from them: the classes, the camera distance and
 the dataset's fingerprint). ~21 kB per frame (xz over rgb uint8, depth float16, object and class
@@ -44,7 +44,7 @@ def load_frame_pack(path: str | Path) -> tuple[TensorDict, dict]:
     """(frames [N], meta) of a pack written by ``save_frame_pack``; a clear error for anything else."""
     path = Path(path)
     if not path.is_file():
-        raise FileNotFoundError(f"no frame pack at {path}: write one with `python recipes/pretrain_vqa_encoder.py "
+        raise FileNotFoundError(f"no frame pack at {path}: write one with `python recipes/pretrain.py part=vqa_encoder "
                                 f"export_pack={path}` where the rollouts are")
     try:
         with np.load(io.BytesIO(lzma.decompress(path.read_bytes())), allow_pickle=False) as z:
@@ -54,6 +54,6 @@ def load_frame_pack(path: str | Path) -> tuple[TensorDict, dict]:
             arrays = {k: torch.from_numpy(z[k]) for k in PACK_KEYS}
     except (lzma.LZMAError, zipfile.BadZipFile, EOFError, OSError, KeyError, ValueError) as err:
         raise ValueError(f"{path} is not a readable frame pack ({err}): write it again with "
-                         f"`python recipes/pretrain_vqa_encoder.py export_pack={path}`") from err
+                         f"`python recipes/pretrain.py part=vqa_encoder export_pack={path}`") from err
     n = arrays[keys.RGB].shape[0]
     return TensorDict(arrays, batch_size=[n]), meta

@@ -50,7 +50,7 @@ def build_model(cfg: DictConfig, ds: MQADataset) -> tuple[VQAModel, dict]:
         model.encoder.load_state_dict(encoder.state_dict())
     elif cfg.encoder.freeze:
         warnings.warn("encoder.weights=null with encoder.freeze=true: the VQA reads a fixed random projection of the "
-                      "images; pretrain one (recipes/pretrain_vqa_encoder.py) or set encoder.freeze=false", stacklevel=2)
+                      "images; pretrain one (recipes/pretrain.py part=vqa_encoder) or set encoder.freeze=false", stacklevel=2)
     return model, encoder_meta
 
 

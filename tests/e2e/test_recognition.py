@@ -176,7 +176,7 @@ def test_recognition_file_round_trip_freezes_and_refuses_what_does_not_fit(tmp_p
     assert all(p.requires_grad for p in (*net.depth_trunk.parameters(), *net.question.parameters()))
     assert torch.equal(source.question_classes.weight, net.question_classes.weight)
     assert all(p.requires_grad for p in _net().class_head.parameters())  # freeze=False leaves them trainable
-    with pytest.raises(FileNotFoundError, match="pretrain_push_trunk.py"):
+    with pytest.raises(FileNotFoundError, match="pretrain.py part=push_trunk"):
         load_recognition(_net(), tmp_path / "missing.pt", classes)
     with pytest.raises(ValueError, match="another dataset"):
         load_recognition(_net(), path, list(reversed(classes)))
@@ -202,7 +202,7 @@ def test_recognition_file_round_trip_freezes_and_refuses_what_does_not_fit(tmp_p
 @pytest.mark.timeout(900)
 def test_pretrain_then_train_dqn_from_the_recognition_file(small_dataset_dir, tmp_path):
     rec = tmp_path / "rec"
-    args = [str(ROOT / "recipes" / "pretrain_push_trunk.py"), f"dataset={small_dataset_dir}", f"out_dir={rec}",
+    args = [str(ROOT / "recipes" / "pretrain.py"), "part=push_trunk", f"dataset={small_dataset_dir}", f"out_dir={rec}",
             "frames.count=24", "frames.max_pushes=3", "train.steps=4", "train.eval_interval=2", "train.batch_size=4",
             "question.steps=300",
             "logger=csv", "logger.progress=false", "threads=1"]

@@ -103,7 +103,7 @@ def test_encoder_pretrains_on_a_few_frames(small_dataset, answering_root, tmp_pa
     path = save_encoder(encoder, tmp_path / "encoder.pt", {"frames": 4})
     again, meta = load_encoder(path)
     assert meta == {"frames": 4} and torch.equal(again.state_dict()["net.0.weight"], encoder.state_dict()["net.0.weight"])
-    with pytest.raises(FileNotFoundError, match="pretrain_vqa_encoder.py"):
+    with pytest.raises(FileNotFoundError, match="pretrain.py part=vqa_encoder"):
         load_encoder(tmp_path / "none.pt")
     torch.save({"format": "mqa_rl.vqa"}, tmp_path / "vqa.pt")
     with pytest.raises(ValueError, match="not a VQA encoder file"):
@@ -153,8 +153,8 @@ def _steps(run, name):
 def test_pretrain_and_train_vqa_recipes_write_log_and_resume(small_dataset, answering_root):
     root, overrides = answering_root
     quiet = ["logger=csv", "logger.progress=false"]
-    pretrain = load_recipe("pretrain_vqa_encoder")
-    summary = pretrain.pretrain(compose_recipe_config("pretrain_vqa_encoder", [
+    pretrain = load_recipe("pretrain")
+    summary = pretrain.pretrain(compose_recipe_config("pretrain", ["part=vqa_encoder",
         *overrides, *quiet, "train.steps=2", "train.batch_size=2", "train.eval_interval=1", "frames.max_frames=8"]))
     assert (root / "encoder" / "encoder.pt").exists() and summary["steps"] == 2
     train_vqa = load_recipe("train_vqa")
@@ -268,10 +268,10 @@ def test_train_vqa_keeps_the_checkpoint_its_validation_metric_picks(small_datase
 def test_frame_pack_carries_the_frames_losslessly_and_pretrains_without_the_dataset(small_dataset, answering_root, tmp_path):
     root, overrides = answering_root
     quiet = ["logger=csv", "logger.progress=false"]
-    pretrain = load_recipe("pretrain_vqa_encoder")
+    pretrain = load_recipe("pretrain")
     pack = tmp_path / "frames.xz"
-    pretrain.export_pack(compose_recipe_config("pretrain_vqa_encoder", [*overrides, f"export_pack={pack}",
-                                                                        "frames.max_frames=6"]))
+    pretrain.export_pack(compose_recipe_config("pretrain", ["part=vqa_encoder", *overrides, f"export_pack={pack}",
+                                                               "frames.max_frames=6"]))
     frames, meta = load_frame_pack(pack)
     expected = pretraining_frames([root / "rollouts" / "counting" / "random" / "train"], small_dataset, max_frames=6, seed=0)
     for key in (keys.RGB, keys.DEPTH, keys.OBJECT_MAP, keys.CLASS_MAP, keys.SCENE, keys.LEVEL):
@@ -279,7 +279,7 @@ def test_frame_pack_carries_the_frames_losslessly_and_pretrains_without_the_data
     assert meta["classes"] == list(small_dataset.classes) and meta["camera_distance"] == small_dataset.camera.distance
     # trains from the pack alone: the dataset path points nowhere
     out = tmp_path / "encoder_from_pack"
-    summary = pretrain.pretrain(compose_recipe_config("pretrain_vqa_encoder", [
+    summary = pretrain.pretrain(compose_recipe_config("pretrain", ["part=vqa_encoder",
         *overrides, *quiet, f"frames.pack={pack}", f"dataset={tmp_path / 'no_dataset'}", f"out_dir={out}",
         "train.steps=2", "train.batch_size=2", "train.eval_interval=1"]))
     _, encoder_meta = load_encoder(out / "encoder.pt")

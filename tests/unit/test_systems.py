@@ -11,7 +11,7 @@ MAIN_JOB = ("no_manipulation", "random", "dqn_countable_budget_kept", "privilege
 
 
 @pytest.mark.parametrize("recipe", ["collect what=rollouts", "collect what=demonstrations", "train_vqa", "evaluate",
-                                    "pretrain_vqa_encoder", "evaluate_policy", "demo"])
+                                    "pretrain part=vqa_encoder", "evaluate_policy", "demo"])
 def test_every_recipe_reads_the_one_registry(recipe):
     from omegaconf import OmegaConf
 

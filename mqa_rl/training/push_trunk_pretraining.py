@@ -1,4 +1,4 @@
-"""Pretrain the push Q-network's recognition on labelled renders, before DQN.
+"""The push Q-network's recognition pretrained on labelled renders, before DQN (``recipes/pretrain.py part=push_trunk``).
 
 The paper's Q-network recognises the asked-about class with ImageNet features fine-tuned by the DQN
 reward. Offline and on 2 CPU cores neither is at hand: from the reward alone the light trunk learnt
@@ -9,20 +9,16 @@ over the classes learn which class each train-split question asks about (from th
 no images). ``train_dqn.py model.class_map=true model.pretrained=<out_dir>/recognition.pt`` (the ``student`` profile:
 the shipped ``checkpoints/recognition/recognition.pt``) starts from them, the visual part frozen by default.
 
-    python recipes/pretrain_push_trunk.py                         # 4,000 frames, 4,000 steps (~15 min on 2 cores)
-    python recipes/pretrain_push_trunk.py frames.count=300 train.steps=50 out_dir=runs/tiny
-
 Writes ``out_dir/frames/`` (the labelled renders, reused by a rerun with the same frames.* settings),
 ``recognition.pt`` (the visual weights with the lowest validation loss, then the question part; written
-atomically), ``csv/`` + ``wandb/`` logs (loss, cell accuracy, per-class IoU of cells ≥ 25 % filled;
+atomically), the logger group's logs (loss, cell accuracy, per-class IoU of cells ≥ 25 % filled;
 question loss and accuracy), ``summary.json``. ``init=<recognition.pt>`` starts from an earlier file
 (with ``train.steps=0``: only the question phase). A killed
 run keeps its frames and its best file; rerunning trains afresh from the cached frames.
 """
 
-from __future__ import annotations
 
-import mqa_rl  # noqa: F401  (first: sets OMP_WAIT_POLICY before torch loads)
+from __future__ import annotations
 
 import json
 import os
@@ -31,7 +27,6 @@ import shutil
 import time
 from pathlib import Path
 
-import hydra
 import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
@@ -47,7 +42,6 @@ from mqa_rl.losses.class_cells import ClassCellsLoss
 from mqa_rl.modules.pretrained_recognition import load_recognition, save_recognition
 from mqa_rl.modules.push_policy import make_push_qnet
 from mqa_rl.training.run_logger import RunLogger
-from mqa_rl.training.signals import exit_on_sigterm
 from mqa_rl.training.vqa_data import scene_split
 from mqa_rl.envs.dihedral import random_dihedral_in
 from mqa_rl.progress import Progress
@@ -129,7 +123,8 @@ def train_question(net, dataset: MQADataset, cfg: DictConfig, logger: RunLogger)
     return result
 
 
-def pretrain(cfg: DictConfig) -> dict:
+def pretrain_push_trunk(cfg: DictConfig) -> dict:
+    """Pretrain the recognition as ``cfg`` (recipes/conf/part/push_trunk.yaml) says; returns the summary it writes."""
     t = cfg.train
     if t.steps < 0 or t.batch_size <= 0 or t.eval_interval <= 0 or cfg.question.steps < 0:
         raise ValueError("train.steps and question.steps must be ≥ 0, train.batch_size and train.eval_interval positive")
@@ -210,13 +205,3 @@ def pretrain(cfg: DictConfig) -> dict:
     write_atomic(out / "summary.json", json.dumps(summary, indent=1))
     print("done:", summary)
     return summary
-
-
-@hydra.main(config_path="conf", config_name="pretrain_push_trunk", version_base="1.3")
-def main(cfg: DictConfig) -> None:
-    exit_on_sigterm()
-    pretrain(cfg)
-
-
-if __name__ == "__main__":
-    main()

@@ -1,28 +1,21 @@
-"""Pretrain the VQA's image encoder (EQA's CNN) on our renders, as EQA did on its own: reconstruct the
-image, label every pixel with its object class (the simulator's segmentation) and predict its height
-above the bin floor (depth), all from the CNN's 32×10×10 bottleneck.
-
-    python recipes/collect.py what=rollouts system=random splits=[train]    # the frames come from these rollouts
-    python recipes/pretrain_vqa_encoder.py
-    python recipes/pretrain_vqa_encoder.py resume=true                 # continue a killed run
-    python recipes/pretrain_vqa_encoder.py export_pack=runs/frames.xz  # the frames in one file (~21 kB each) ...
-    python recipes/pretrain_vqa_encoder.py frames.pack=runs/frames.xz device=cuda   # ... to train on a GPU machine
+"""The VQA's image encoder (EQA's CNN) pretrained on our renders, as EQA did on its own (``recipes/pretrain.py
+part=vqa_encoder``): reconstruct the image, label every pixel with its object class (the simulator's segmentation)
+and predict its height above the bin floor (depth), all from the CNN's 32×10×10 bottleneck.
 
 Writes ``out_dir/encoder.pt`` (the encoder with the lowest validation loss on held-out scenes; what
-recipes/train_vqa.py loads), ``checkpoints/`` (atomic, for resume=true), ``csv/`` + ``wandb/`` logs
-(losses, class accuracy on object pixels, height error), ``config.yaml``, ``summary.json``.
+recipes/train_vqa.py loads), ``checkpoints/`` (atomic, for resume=true), the logger group's logs
+(losses, class accuracy on object pixels, height error), ``config.yaml``, ``summary.json``; or, with
+``export_pack=<file>``, only the frames it would train on, in one file (``mqa_rl.training.frame_pack``).
 """
 
-from __future__ import annotations
 
-import mqa_rl  # noqa: F401  (first: sets OMP_WAIT_POLICY before torch loads)
+from __future__ import annotations
 
 import json
 import random
 import time
 from pathlib import Path
 
-import hydra
 import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
@@ -38,7 +31,6 @@ from mqa_rl.modules.vqa_encoder import FrameEncoder, PretrainHeads, save_encoder
 from mqa_rl.training.frame_pack import load_frame_pack, save_frame_pack
 from mqa_rl.training.model_checkpoint import ModelCheckpoint
 from mqa_rl.training.run_logger import RunLogger, trim_scalars
-from mqa_rl.training.signals import exit_on_sigterm
 from mqa_rl.training.vqa_data import pretraining_frames, scene_split
 from mqa_rl.envs.dihedral import random_dihedral_in
 from mqa_rl.progress import Progress
@@ -84,7 +76,8 @@ def export_pack(cfg: DictConfig) -> Path:
     return path
 
 
-def pretrain(cfg: DictConfig) -> dict:
+def pretrain_vqa_encoder(cfg: DictConfig) -> dict:
+    """Pretrain the encoder as ``cfg`` (recipes/conf/part/vqa_encoder.yaml) says; returns the summary it writes."""
     t = cfg.train
     if t.steps <= 0 or t.batch_size <= 0 or t.eval_interval <= 0 or cfg.checkpoint.interval_steps <= 0:
         raise ValueError("train.steps, train.batch_size, train.eval_interval and checkpoint.interval_steps must be positive")
@@ -179,16 +172,3 @@ def pretrain(cfg: DictConfig) -> dict:
     write_atomic(out / "summary.json", json.dumps(summary, indent=1))
     print("done:", summary)
     return summary
-
-
-@hydra.main(config_path="conf", config_name="pretrain_vqa_encoder", version_base="1.3")
-def main(cfg: DictConfig) -> None:
-    exit_on_sigterm()
-    if cfg.export_pack:
-        export_pack(cfg)
-    else:
-        pretrain(cfg)
-
-
-if __name__ == "__main__":
-    main()
