@@ -260,8 +260,9 @@ def test_pretrain_then_train_dqn_from_the_recognition_file(small_dataset_dir, tm
         assert torch.equal(net.class_head.state_dict()[name], value)
     # the recognition a trained run carries, extracted as a file: the pretraining's visual weights, which
     # start a new run (here a geometric student: its push branch reads the target map and heights)
-    extracted = tmp_path / "extracted.pt"
-    extract = [sys.executable, str(ROOT / "recipes" / "extract_recognition.py"), f"run={run}", f"out={extracted}"]
+    extracted = tmp_path / "extracted" / "recognition.pt"
+    extract = [sys.executable, str(ROOT / "recipes" / "export_policy.py"), "export=recognition", f"run={run}",
+               f"out_dir={extracted.parent}"]
     out = subprocess.run(extract, capture_output=True, text=True, timeout=300, env=ENV, cwd=tmp_path)
     assert out.returncode == 0, out.stderr[-3000:]
     again = torch.load(extracted, weights_only=True)

@@ -23,6 +23,9 @@ def test_export_policy_refuses_an_export(tmp_path):
     cfg = compose_recipe_config("export_policy", [f"run={REPO / 'checkpoints' / 'dqn_local'}", f"out_dir={tmp_path / 'x'}"])
     with pytest.raises(ValueError, match="is already an export of .* use it as it is"):
         export.export(cfg)
+    with pytest.raises(ValueError, match="export=polcy: one of policy, recognition"):
+        export.export(compose_recipe_config("export_policy", ["export=polcy", f"run={REPO / 'checkpoints' / 'dqn_local'}",
+                                                              f"out_dir={tmp_path / 'x'}"]))
     assert not (tmp_path / "x").exists()
 
 
