@@ -24,6 +24,17 @@ with the same ``out_dir``, an evaluation resumes, keeping the finished units tha
 evaluation's random episodes when they were run on the same questions (same dataset, split, seed,
 episodes, push limit, question types, pusher): the χ metrics carry over, the reward only if the
 reward config matches too (else it is left out).
+
+Figures of runs instead of an evaluation (``plot=``, written to ``out_dir``):
+
+    python recipes/evaluate_policy.py 'plot=[runs/global,runs/local,runs/global_local]' out_dir=runs/fig7
+    python recipes/evaluate_policy.py 'plot=[runs/curves/global,runs/curves/local]' out_dir=runs/curves
+
+A train_dqn.py run gives a panel of the paper's Fig. 7 (``fig7_rewards.png``): the training reward per episode (the mean
+over the episodes that ended in each logged batch, smoothed over ``plot_window`` points) and the greedy evaluations'
+(``eval/reward``), against collected frames; a run trained from demonstrations also gets ``fig7_rewards_pretraining.png``
+(the pre-training's demonstration loss, ``demo_near``, ``demo_stop_agreement`` per update). A ``snapshots=true`` folder
+of this recipe (its ``curve.json``) gives a line of ``curves.png``: the learning curves of several runs, per level.
 """
 
 from __future__ import annotations
@@ -40,7 +51,8 @@ from mqa_rl.collectors.ray_pool import check_backend
 from mqa_rl.data.dataset import MQADataset
 from mqa_rl.envs.video import write_video
 from mqa_rl.evaluation.episode_metrics import mean_ci95, scene_bootstrap_ci95
-from mqa_rl.evaluation.learning_curve import plot_learning_curves, run_snapshots
+from mqa_rl.evaluation.learning_curve import plot_learning_curves, read_curve, run_snapshots
+from mqa_rl.evaluation.reward_curves import plot_pretraining, plot_reward_curves, read_scalar
 from mqa_rl.evaluation.unit_reuse import content_digest, episodes_meta, greedy_identity, reuse_episodes
 from mqa_rl.evaluation.policy_units import REFERENCE_KINDS, close_envs, run_units
 from mqa_rl.files import write_atomic
@@ -223,9 +235,41 @@ def evaluate_snapshots(cfg: DictConfig) -> list[tuple[int, dict]]:
     return points
 
 
+def plot(cfg: DictConfig) -> list[Path]:
+    """The figures of the folders ``cfg.plot`` into ``cfg.out_dir``: Fig. 7 of the train_dqn.py runs (a panel each; the
+    pre-training's figure of those trained from demonstrations), the learning curves of the ``snapshots=true`` folders."""
+    folders = [Path(p) for p in cfg.plot]
+    curves = [f for f in folders if (f / "curve.json").is_file()]
+    runs = [f for f in folders if f not in curves]
+    neither = [str(f) for f in runs if not (f / "csv" / "scalars").is_dir()]
+    if neither:
+        raise FileNotFoundError(f"plot: {', '.join(neither)} is neither a train_dqn.py run (csv/scalars) nor a "
+                                f"snapshots=true folder of this recipe (curve.json); make a learning curve with "
+                                f"`python recipes/evaluate_policy.py run=<run> snapshots=true out_dir=<folder>`")
+    out = Path(cfg.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    if curves:
+        written.append(plot_learning_curves({f.name: read_curve(f / "curve.json") for f in curves}, out / "curves.png"))
+    pretrained = [run for run in runs if len(read_scalar(run, "demo_pretrain/loss_demo")[0])]
+    if pretrained:
+        written.append(plot_pretraining(pretrained, out / "fig7_rewards_pretraining.png"))
+    rl = [run for run in runs if run not in pretrained or len(read_scalar(run, "train/reward")[0])]
+    if rl:                  # every run without pre-training is here: plot_reward_curves() names one with no episode
+        written.append(plot_reward_curves(rl, out / "fig7_rewards.png", int(cfg.plot_window)))
+    for path in written:
+        print(path)
+    return written
+
+
 @hydra.main(config_path="conf", config_name="evaluate_policy", version_base="1.3")
 def main(cfg: DictConfig) -> None:
-    evaluate_snapshots(cfg) if cfg.snapshots else evaluate(cfg)
+    if cfg.plot:
+        plot(cfg)
+    elif cfg.snapshots:
+        evaluate_snapshots(cfg)
+    else:
+        evaluate(cfg)
 
 
 def record_unit(out: Path, meta: dict, video_format: str, unit: tuple[str, str], result) -> dict:

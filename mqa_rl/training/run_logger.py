@@ -2,7 +2,7 @@
 dashboards its ``logger`` settings choose (TensorBoard, MLflow, wandb: ``mqa_rl.training.dashboards``).
 
 CSV scalars land in ``<out_dir>/csv/scalars/<group>/<name>.csv`` (rows ``step,value``, step = collected
-frames) whatever the dashboards; ``recipes/plot_curves.py`` reads them. Images are also written to
+frames) whatever the dashboards; ``recipes/evaluate_policy.py plot=`` reads them. Images are also written to
 ``<out_dir>/media``. On resume, rows logged after the checkpoint are dropped first (``trim_scalars``), so no step is
 logged twice. An evaluation of a run logs into the run's own dashboards (``RunLogger.of_run``), leaving its files alone.
 """

@@ -245,10 +245,11 @@ def test_pretrain_then_train_dqn_from_the_recognition_file(small_dataset_dir, tm
     out = subprocess.run([sys.executable, *longer], capture_output=True, text=True, timeout=600, env=ENV, cwd=tmp_path)
     assert out.returncode == 0 and "5 demonstration pre-training updates" in out.stdout
     assert "demonstration pre-training 5/5" not in out.stdout
-    out = subprocess.run([sys.executable, str(ROOT / "recipes" / "plot_curves.py"), str(run), "--out", str(tmp_path / "f.png")],
+    figures = tmp_path / "figures"
+    out = subprocess.run([sys.executable, str(ROOT / "recipes" / "evaluate_policy.py"), f"plot=[{run}]", f"out_dir={figures}"],
                          capture_output=True, text=True, timeout=300, env=ENV, cwd=tmp_path)
     assert out.returncode == 0, out.stderr[-3000:]
-    assert (tmp_path / "f_pretraining.png").stat().st_size > 0 and (tmp_path / "f.png").stat().st_size > 0
+    assert (figures / "fig7_rewards_pretraining.png").stat().st_size > 0 and (figures / "fig7_rewards.png").stat().st_size > 0
     # the frozen recognition is unchanged by DQN training, and the trained policy loads for evaluation
     from mqa_rl.envs.sapien_bin import SapienBinEnv
     from mqa_rl.modules.trained_policy import load_greedy

@@ -101,8 +101,8 @@ def test_tiny_training_run_evaluation_and_curves(small_dataset_dir, tmp_path):
                   "policies=[bogus]", "seed=7", f"out_dir={ev3}", cwd=tmp_path, ok=False)
     assert failed.returncode != 0 and "policies: unknown system 'bogus'" in failed.stderr and "greedy" in failed.stderr
     assert (ev3 / "config.yaml").read_text() == before
-    _run(str(ROOT / "recipes" / "plot_curves.py"), str(run), "--out", str(tmp_path / "fig7.png"), cwd=tmp_path)
-    assert (tmp_path / "fig7.png").stat().st_size > 0
+    _run(str(ROOT / "recipes" / "evaluate_policy.py"), f"plot=[{run}]", f"out_dir={tmp_path / 'fig7'}", cwd=tmp_path)
+    assert (tmp_path / "fig7" / "fig7_rewards.png").stat().st_size > 0
     # the policy exported without its replay buffer: small, and the same greedy episodes as the run itself
     EXPORT = str(ROOT / "recipes" / "export_policy.py")
     shipped = tmp_path / "shipped"

@@ -29,6 +29,17 @@ def test_export_policy_refuses_an_export(tmp_path):
     assert not (tmp_path / "x").exists()
 
 
+def test_evaluate_policy_plots_only_training_runs_and_learning_curves(tmp_path):
+    """plot=[...]: a folder that is neither a train_dqn.py run nor a snapshots=true folder is named, with how to make a
+    learning curve, before anything is drawn."""
+    evaluate_policy = load_recipe("evaluate_policy")
+    (tmp_path / "eval").mkdir()
+    cfg = compose_recipe_config("evaluate_policy", [f"plot=[{tmp_path / 'eval'}]", f"out_dir={tmp_path / 'figures'}"])
+    with pytest.raises(FileNotFoundError, match="is neither a train_dqn.py run .* snapshots=true out_dir="):
+        evaluate_policy.plot(cfg)
+    assert not (tmp_path / "figures").exists()
+
+
 def test_an_evaluation_logs_into_a_training_runs_dashboards_never_into_an_exported_policy(tmp_path):
     from mqa_rl.training.policy_export import has_dashboards
 
