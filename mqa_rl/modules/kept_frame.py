@@ -54,11 +54,18 @@ class FrameKeeper:
         for i, s in enumerate(states):
             if read[i]:
                 expected[i] = s.get(keys.PERCEIVED_READING)[EXPECTED]
-        todo = [i for i in range(len(states)) if not read[i]]
+        first: dict[bytes, int] = {}              # a push that moved nothing leaves the same frame: read it once
+        same = {}
+        for i in range(len(states)):
+            if not read[i]:
+                same[i] = first.setdefault(self.reading.frames(states[i]).numpy().tobytes(), i)
+        todo = sorted(set(same.values()))
         if todo:
             frames = torch.stack([self.reading.frames(states[i]) for i in todo])
             question = states[0].get(keys.QUESTION)
-            expected[todo] = self.reading(frames, question.expand(len(todo), *question.shape))[:, EXPECTED]
+            expected[todo] = self.reading.expected(frames, question.expand(len(todo), *question.shape))
+            for i, j in same.items():
+                expected[i] = expected[j]
         return last_argmax(expected)
 
 

@@ -24,7 +24,7 @@ from torch import nn
 
 from mqa_rl import keys
 from mqa_rl.modules.perception import CountingPerception, check_library, load_perception
-from mqa_rl.modules.vote_counting import MAX_COUNT, TOP
+from mqa_rl.modules.vote_counting import MAX_COUNT, TOP, expected_counts
 
 READING = ("perceived_count", *(f"perceived_mass_{i}" for i in range(1, TOP + 1)), "perceived_log_area",
            "perceived_expected", "perceived_objects")
@@ -114,6 +114,14 @@ class PerceivedCount(nn.Module):
         row = feats[torch.arange(feats.shape[0]), self.asked_channel(question)]
         count = row[:, :MAX_COUNT + 1].argmax(-1, keepdim=True).float()
         return torch.cat([count, row[:, MAX_COUNT + 1:], feats[:, 0, :1]], -1).reshape(*batch, len(READING))
+
+    @torch.no_grad()
+    def expected(self, frames: torch.Tensor, question: torch.Tensor) -> torch.Tensor:
+        """[B] the asked class's expected count (``forward``'s ``perceived_expected``, the same value) without the
+        vote clustering the other entries need: what a frame keeper compares."""
+        probs, _, density = (t.float().cpu() for t in self.perception.predict(frames))
+        asked = self.asked_channel(question.reshape(-1, question.shape[-1]))
+        return expected_counts(probs, density)[torch.arange(len(asked)), asked - 1]
 
     def read(self, td: TensorDictBase) -> torch.Tensor:
         return self(self.frames(td), td.get(keys.QUESTION))

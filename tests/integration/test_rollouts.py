@@ -319,6 +319,10 @@ def test_the_frame_keeper_keeps_the_highest_reading_and_the_later_of_equals(smal
     assert keeper.choose(states) == best
     assert keeper.choose([*states, states[best].clone()]) == 4                      # a tie: the later frame
     assert keeper.choose(states[:1]) == 0
+    assert torch.equal(keeper.reading.expected(frames, question.expand(4, -1)), scores)   # no clustering, same value
+    read = []
+    keeper.reading.expected = lambda f, q, real=keeper.reading.expected: read.append(len(f)) or real(f, q)
+    assert keeper.choose([*states, states[best].clone(), states[0].clone()]) == 4 and read == [4]   # each frame once
 
 
 def test_evaluate_policy_reports_the_counter_on_the_frame_kept(small_dataset_dir, small_dataset, tmp_path, monkeypatch):
