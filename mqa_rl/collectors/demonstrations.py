@@ -30,6 +30,9 @@ from mqa_rl.progress import Progress
 
 DEMO_KEYS = (*OBS_KEYS, keys.TARGET_CELLS, keys.ACTION)
 DEMOS_META = "demos.json"            # beside the memmap folder "data": written last (recipes/collect.py what=demonstrations)
+# the teacher's options a demonstration set records that tell its teachers apart, with the value an older set lacking one ran with
+TEACHER_OPTIONS = {"refine_radius": 0, "min_visible_fraction": 0.3, "require_gain": False, "geometry": "visible",
+                   "order": "visible_first"}
 
 
 def collect_demonstrations(env, states: int, *, progress: bool = True, **oracle_options) -> TensorDict:
@@ -84,6 +87,26 @@ def write_demonstration_set(out_dir, env, states: int, oracle: dict, settings: d
     print(f"{len(demos)} demonstrations in {seconds:.0f} s -> {out}: stop {meta['stop_fraction']:.2f}, "
           f"masked {meta['masked_fraction']:.3f}")
     return meta
+
+
+def other_teachers_demonstrations(folders, oracle: dict, teacher: str) -> str | None:
+    """Why one of ``folders`` holds demonstrations of another teacher than ``oracle`` (the options of the teacher
+    named ``teacher``), or None when each holds none or the same teacher's: reusing them would train a student on
+    the other teacher silently."""
+    want = _described(oracle)
+    for folder in map(Path, folders):
+        if (folder / DEMOS_META).is_file():
+            have = _described(json.loads((folder / DEMOS_META).read_text()).get("oracle", {}))
+            if have != want:
+                return (f"{folder} holds demonstrations of another teacher (oracle {', '.join(TEACHER_OPTIONS)} = "
+                        f"{have}), not the {teacher} teacher's ({want})")
+    return None
+
+
+def _described(oracle: dict) -> str:
+    o = {**TEACHER_OPTIONS, **{k: v for k, v in oracle.items() if k in TEACHER_OPTIONS}}
+    return (f"{o['refine_radius']} {float(o['min_visible_fraction'])} {str(o['require_gain']).lower()} {o['geometry']} "
+            f"{o['order']}")
 
 
 def load_demonstrations(path, dataset_root: str | Path | None = None) -> TensorDict:

@@ -21,6 +21,7 @@ LAYERS = (
     ("collectors",),                            # gather (and the replay buffer)
     ("training", "evaluation"),                 # wire a training run; score episodes and answers
     ("demo",),
+    ("pipelines",),                             # run recipes one after another (recipes/pipeline.py)
 )
 LAYER = {name: i for i, names in enumerate(LAYERS) for name in names}
 
