@@ -71,12 +71,12 @@ def missing(reason: str, command: str) -> dict:
 
 def policy_command(name: str, run: str) -> str:
     """The command that trains system ``name``'s policy into ``run``: a DQfD variant continues a student
-    (tools/train_reward_variants.sh writes OUT/<variant>/{dqn,stop}), anything else is a train_dqn.py run."""
+    (pipeline=reward_variants writes ROOT/<variant>/{dqn,stop}), anything else is a train_dqn.py run."""
     path = Path(run)
     variant = name.removeprefix("dqfd_")
     if name.startswith("dqfd_") and path.name == "dqn" and path.parent.name == variant:
-        return (f"bash tools/train_student.sh runs/student 1 && MQA_VARIANTS={variant} "
-                f"bash tools/train_reward_variants.sh runs/student {path.parents[1]}")
+        return (f"python recipes/pipeline.py pipeline=student root=runs/student seed=1 && python recipes/pipeline.py "
+                f"pipeline=reward_variants student=runs/student root={path.parents[1]} 'variants=[{variant}]'")
     return f"python recipes/train_dqn.py reward=<variant> out_dir={run}"
 
 

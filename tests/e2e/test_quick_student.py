@@ -1,9 +1,9 @@
-"""The students' profiles: `student` (tools/train_student.sh) starts from the shipped recognition file, frozen,
+"""The students' profiles: `student` (recipes/pipeline.py pipeline=student) starts from the shipped recognition file, frozen,
 with the budget it promises; `shipped_student` rebuilds the network of checkpoints/dqn_geometric_student."""
 
 import json
-import os
 import subprocess
+import sys
 
 import torch
 
@@ -56,16 +56,15 @@ def test_the_shipped_student_profile_composes_the_shipped_students_config_and_lo
     assert any(not torch.equal(before[k], v) for k, v in net.state_dict().items())
 
 
-def run_quick_chain(root, **env):
-    """tools/train_student.sh on ROOT, seed 0, with MQA_TEACHER as given (unset when not)."""
-    base = {k: v for k, v in os.environ.items() if k != "MQA_TEACHER"}
-    return subprocess.run(["bash", str(REPO / "tools/train_student.sh"), str(root), "0"],
-                          env={**base, **env}, capture_output=True, text=True, timeout=300)
+def run_quick_chain(root, *overrides):
+    """recipes/pipeline.py pipeline=student on ROOT, seed 0, as a user runs it (its default teacher unless given)."""
+    return subprocess.run([sys.executable, str(REPO / "recipes" / "pipeline.py"), "pipeline=student", f"root={root}", "seed=0",
+                           *overrides], cwd=root.parent, capture_output=True, text=True, timeout=300)
 
 
 def test_the_quick_chain_names_its_teachers_and_refuses_others(tmp_path):
-    done = run_quick_chain(tmp_path / "run", MQA_TEACHER="bogus")
-    assert done.returncode == 2 and "MQA_TEACHER must be 'image', 'refined' or 'countable'" in done.stderr
+    done = run_quick_chain(tmp_path / "run", "teacher=bogus")
+    assert done.returncode == 2 and "teacher=bogus: choose one of image, refined, countable" in done.stderr
     assert not (tmp_path / "run").exists()                 # refused before anything is written
 
 
@@ -78,4 +77,5 @@ def test_the_quick_chain_refuses_to_reuse_the_other_teachers_demonstrations(tmp_
     assert ("demos_0 holds demonstrations of another teacher (oracle refine_radius, min_visible_fraction, require_gain, "
             "geometry, order = 1 0.3 false visible visible_first), not the image teacher's "
             "(0 0.3 false visible visible_first)") in done.stderr
+    assert "set teacher= to match" in done.stderr
     assert sorted(p.name for p in (tmp_path / "run").iterdir()) == ["demos_0"]      # nothing else started

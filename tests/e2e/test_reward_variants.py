@@ -1,37 +1,46 @@
-"""tools/train_reward_variants.sh: the paper's three rewards as DQfD continuations of a finished student. Its
-refusals come before anything is written."""
+"""recipes/pipeline.py pipeline=reward_variants: the paper's three rewards as DQfD continuations of a finished student,
+run as a user runs it. Its refusals come before anything is written."""
 
-import os
 import subprocess
+import sys
 
 from conftest import REPO, compose_recipe_config
 
 
-def run_variants(*args, **env):
-    return subprocess.run(["bash", str(REPO / "tools/train_reward_variants.sh"), *map(str, args)],
-                          env={**os.environ, **env}, capture_output=True, text=True, timeout=120)
+def run_variants(tmp_path, *overrides):
+    return subprocess.run([sys.executable, str(REPO / "recipes" / "pipeline.py"), "pipeline=reward_variants",
+                           *map(str, overrides)], cwd=tmp_path, capture_output=True, text=True, timeout=300)
+
+
+def finished_student(tmp_path):
+    """A folder shaped as a finished pipeline=student root: a checkpoint and both demonstration sets' demos.json."""
+    student = tmp_path / "student"
+    (student / "dqn" / "checkpoints" / "checkpoint-000000000008").mkdir(parents=True)
+    (student / "dqn" / "config.yaml").write_text("seed: 0\ncollector: {total_frames: 8}\n")
+    (student / "demos_1").mkdir()
+    (student / "demos_1" / "demos.json").write_text("{}")
+    return student
 
 
 def test_it_refuses_a_folder_without_a_finished_student(tmp_path):
     (tmp_path / "student" / "dqn").mkdir(parents=True)
-    done = run_variants(tmp_path / "student", tmp_path / "out")
+    done = run_variants(tmp_path, f"student={tmp_path / 'student'}", f"root={tmp_path / 'out'}")
     assert done.returncode == 2 and "holds no finished imitation student" in done.stderr
-    assert "bash tools/train_student.sh" in done.stderr
+    assert "python recipes/pipeline.py pipeline=student" in done.stderr
     assert not (tmp_path / "out").exists()
 
 
-def test_it_refuses_bad_frames_and_unknown_variants_before_writing(tmp_path):
-    student = tmp_path / "student"
-    (student / "dqn" / "checkpoints" / "checkpoint-000000000008").mkdir(parents=True)
-    (student / "demos_1").mkdir()
-    (student / "demos_1" / "demos.json").write_text("{}")
-    done = run_variants(student, tmp_path / "out", "ten")
-    assert done.returncode == 2 and "FRAMES must be a positive integer" in done.stderr
-    done = run_variants(student, tmp_path / "out", 0)
-    assert done.returncode == 2 and "FRAMES must be a positive integer" in done.stderr
-    done = run_variants(student, tmp_path / "out", 100, MQA_VARIANTS="global lokal")
-    assert done.returncode == 2 and "unknown variant 'lokal'" in done.stderr
-    assert not (tmp_path / "out").exists()
+def test_it_refuses_bad_frames_unknown_variants_and_options_before_writing(tmp_path):
+    student, out = finished_student(tmp_path), tmp_path / "out"
+    done = run_variants(tmp_path, f"student={student}", f"root={out}", "frames=ten")
+    assert done.returncode == 2 and "frames must be a positive whole number, got 'ten'" in done.stderr
+    done = run_variants(tmp_path, f"student={student}", f"root={out}", "frames=0")
+    assert done.returncode == 2 and "frames must be a positive whole number, got '0'" in done.stderr
+    done = run_variants(tmp_path, f"student={student}", f"root={out}", "frames=100", "variants=[global,lokal]")
+    assert done.returncode == 2 and "unknown reward 'lokal'" in done.stderr and "global_local" in done.stderr
+    done = run_variants(tmp_path, f"student={student}", f"root={out}", "framez=100")
+    assert done.returncode == 2 and "pipeline=reward_variants has no option 'framez': its options are" in done.stderr
+    assert not out.exists()
 
 
 def test_the_variants_continue_the_students_network_with_a_gentle_rl_phase():
@@ -45,13 +54,10 @@ def test_the_variants_continue_the_students_network_with_a_gentle_rl_phase():
 
 
 def test_it_refuses_an_unknown_own_stop_setting_before_writing(tmp_path):
-    """MQA_OWN_STOP=0 (no stop fitted: the budget-and-kept-frame system) or 1; anything else is refused at once,
+    """own_stop=false (no stop fitted: the budget-and-kept-frame system) or true; anything else is refused at once,
     not after minutes of training when the stop step comes."""
-    student = tmp_path / "student"
-    (student / "dqn" / "checkpoints" / "checkpoint-000000000008").mkdir(parents=True)
-    (student / "dqn" / "config.yaml").write_text("seed: 0\ncollector: {total_frames: 8}\n")
-    (student / "demos_1").mkdir()
-    (student / "demos_1" / "demos.json").write_text("{}")
-    done = run_variants(student, tmp_path / "out", 100, MQA_VARIANTS="countable", MQA_OWN_STOP="no")
-    assert done.returncode == 2 and "MQA_OWN_STOP must be 1" in done.stderr and "got 'no'" in done.stderr
+    student = finished_student(tmp_path)
+    done = run_variants(tmp_path, f"student={student}", f"root={tmp_path / 'out'}", "frames=100", "variants=[countable]",
+                        "own_stop=no")
+    assert done.returncode == 2 and "own_stop must be true or false" in done.stderr and "got 'no'" in done.stderr
     assert not (tmp_path / "out").exists()

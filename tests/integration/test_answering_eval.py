@@ -95,7 +95,8 @@ def test_evaluate_writes_table3_and_names_what_is_missing(small_dataset, trained
     assert "| random |" in table and "0.277 / 0.308 / 0.274" in table                 # the paper's beside ours
     assert "| dqn_local (DQN(R_l)) | missing" in table and "train_dqn.py" in table
     # a DQfD variant is made by continuing a student, and its hint says so
-    assert f"MQA_VARIANTS=local bash tools/train_reward_variants.sh runs/student {tmp_path / 'variants'}" in table
+    assert (f"python recipes/pipeline.py pipeline=reward_variants student=runs/student root={tmp_path / 'variants'} "
+            f"'variants=[local]'") in table
     assert "answer prior" in table
     sys_res = results["systems"]
     assert sys_res["random"]["status"] == "ok" and sys_res["dqn_global"]["status"] == "missing"

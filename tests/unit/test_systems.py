@@ -7,7 +7,7 @@ from conftest import compose_recipe_config, load_recipe, system_registry
 
 from mqa_rl.modules.systems import system_spec, systems_by_id, table3_systems
 
-MAIN_JOB = ("no_manipulation", "random", "dqn_countable_budget_kept", "privileged")     # tools/main.sh
+MAIN_JOB = tuple(compose_recipe_config("pipeline", ["pipeline=main"]).report)     # tools/main.sh's systems
 
 
 @pytest.mark.parametrize("recipe", ["collect what=rollouts", "collect what=demonstrations", "train_vqa", "evaluate",
