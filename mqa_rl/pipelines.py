@@ -206,10 +206,13 @@ def _value(value) -> str:
     if isinstance(value, (list, tuple)):
         return "[" + ",".join(_value(v) for v in value) + "]"
     text = str(value)
-    plain = text and all(c.isalnum() or c in "_-+./:@~%" for c in text) and text.lower() not in ("null", "true", "false")
-    if plain and not text.replace(".", "", 1).replace("-", "", 1).isdigit():
-        return text
-    return "'" + text.replace("\\", "\\\\").replace("'", "\\'") + "'"
+    plain = text and all(c.isalnum() or c in "_-+./:@" for c in text) and text.lower() not in ("null", "true", "false")
+    try:
+        float(text)                    # a string that reads as a number stays a string
+    except ValueError:
+        if plain:
+            return text
+    return "'" + text.replace("'", "\\'") + "'"
 
 
 def _flat_args(args, where: str) -> list[str]:

@@ -129,3 +129,16 @@ def test_every_pipeline_plans_steps_of_existing_recipes(tmp_path):
     assert [s.run for s in steps if s.active] == ["make_dataset", None, "train_dqn", "evaluate_policy", None]
     evaluation = next(s for s in steps if s.active and s.run == "evaluate_policy")
     assert "stop_margin=inf" in evaluation.args and "baseline_from=null" in evaluation.args
+
+
+def test_a_mapping_argument_is_written_as_hydra_reads_it_back():
+    """{key: value} steps' arguments: null, booleans, numbers, lists as such; a string that would read as something
+    else (a number, null, spaces, quotes) quoted, so the recipe gets the value the pipeline config holds."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    from mqa_rl.pipelines import override
+
+    parser = OverridesParser.create()
+    for value in (None, True, 3, 1.5, "runs/a-b.c:d@e+f", "a b", "it's", "100", "1e-4", "null", "~x%y", ["a", None, 2]):
+        assert parser.parse_override(override("k", value)).value() == value, value
+    assert override("baseline_from", None) == "baseline_from=null" and override("k", "runs/x") == "k=runs/x"
