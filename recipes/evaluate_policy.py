@@ -217,6 +217,13 @@ def evaluate_snapshots(cfg: DictConfig) -> list[tuple[int, dict]]:
     if not snapshots:
         raise FileNotFoundError(f"{cfg.run} has no snapshots/checkpoint-*: train it with checkpoint.snapshot_interval_frames=<N> "
                                 f"(profile=paper_cpu keeps one every 1,000 frames)")
+    if cfg.snapshot_frames is not None:                        # a subset of the curve's points
+        held = dict(snapshots)
+        missing = sorted(set(map(int, cfg.snapshot_frames)) - set(held))
+        if missing:
+            raise ValueError(f"snapshot_frames={list(cfg.snapshot_frames)}: {cfg.run} has no snapshot at {missing} frames; "
+                             f"it has {sorted(held)} (null: every one)")
+        snapshots = [(f, held[f]) for f in sorted(set(map(int, cfg.snapshot_frames)))]
     out = Path(cfg.out_dir)
     first = out / f"frames-{snapshots[0][0]:07d}"
     points = []

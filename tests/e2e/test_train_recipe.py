@@ -62,6 +62,14 @@ def test_tiny_training_run_evaluation_and_curves(small_dataset_dir, tmp_path):
     points = json.loads((curve / "curve.json").read_text())["points"]
     assert [p["frames"] for p in points] == [16, 32] and "greedy-random" in points[1]["results"]["easy"]
     assert out_curve.stdout.count("random: reused") == 1 and (curve / "curve.png").stat().st_size > 0
+    subset = _run(str(ROOT / "recipes" / "evaluate_policy.py"), f"run={run}", "snapshots=true", "snapshot_frames=[32]",
+                  "episodes_per_level=1", "difficulties=[easy]", "policies=[greedy,random]", "video_episodes=0",
+                  f"out_dir={curve}", cwd=tmp_path)                   # one point of the curve, its episodes kept
+    assert [p["frames"] for p in json.loads((curve / "curve.json").read_text())["points"]] == [32]
+    assert "greedy: reused" in subset.stdout
+    absent = _run(str(ROOT / "recipes" / "evaluate_policy.py"), f"run={run}", "snapshots=true", "snapshot_frames=[48]",
+                  f"out_dir={tmp_path / 'absent'}", cwd=tmp_path, ok=False)
+    assert absent.returncode != 0 and "no snapshot at [48] frames" in absent.stderr
     # greedy vs random on the test split, and the Fig. 7 curves
     ev = tmp_path / "eval"
     _run(str(ROOT / "recipes" / "evaluate_policy.py"), f"run={run}", "episodes_per_level=2", "difficulties=[easy]",
