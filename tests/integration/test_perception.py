@@ -296,7 +296,7 @@ def test_frames_perception_and_counting_vqa_recipes_end_to_end(small_dataset, sp
     collect = load_recipe("collect")
     args = [f"dataset={small_dataset.root}", f"out_dir={frames}", "episodes_per_scene=1", "pushes=1", "workers=1",
             "chunk_episodes=2", f"protected=[{{dataset: {sparse_dataset.root}, split: null}}]"]
-    collect.main.__wrapped__(compose_recipe_config("collect", args))
+    collect.main.__wrapped__(compose_recipe_config("collect", ["what=frames", *args]))
     records = load_records(frames)
     n = len(small_dataset.scenes)
     assert records.shape[0] == 2 * n and records.get(keys.RGB).shape[-1] == 112
