@@ -10,6 +10,9 @@ no squeeze-excitation and uses ReLU6, and its stem expects roughly ImageNet-stan
 The perception reads four of them, each at half the side of the one before, the finest being the
 stride-4 map (56 × 56 cells for the 224-px render) with the stride-2 map average-pooled onto it: small
 targets are 20-100 px of the render, a few cells of the finest map.
+
+The push Q-network's ``efficientnet_lite0`` trunk (``mqa_rl.modules.trunks``) keeps the stem and blocks
+0-4 (``last_block=LAST_BLOCK[2]``: 40 channels at stride 8) with the same weights.
 """
 
 from __future__ import annotations
@@ -47,11 +50,13 @@ class EfficientLiteEncoder(nn.Module):
 
     channels = (16 + 24, 40, 112, 192)        # at the output resolution and each stride-2 step below it
 
-    def __init__(self):
+    def __init__(self, last_block: int = LAST_BLOCK[-1]):
+        """``last_block``: keep Lite0's blocks 0…last_block (``forward`` needs all of ``LAST_BLOCK``; a subclass
+        that keeps fewer brings its own forward)."""
         super().__init__()
         net = _lite0()
         self.stem = nn.Sequential(net._conv_stem, net._bn0, nn.ReLU6(inplace=True))
-        self.blocks = nn.ModuleList(net._blocks[:LAST_BLOCK[-1] + 1])
+        self.blocks = nn.ModuleList(net._blocks[:last_block + 1])
 
     def load_imagenet(self) -> None:
         """Copy the ImageNet weights of the blocks kept (strict: every kept tensor must be in the file)."""
@@ -59,7 +64,7 @@ class EfficientLiteEncoder(nn.Module):
         stem = {"_conv_stem.": "stem.0.", "_bn0.": "stem.1."}
         mine = {stem[prefix] + k[len(prefix):]: v for k, v in blob.items() for prefix in stem if k.startswith(prefix)}
         mine.update({k[1:]: v for k, v in blob.items()
-                     if k.startswith("_blocks.") and int(k.split(".")[1]) <= LAST_BLOCK[-1]})
+                     if k.startswith("_blocks.") and int(k.split(".")[1]) < len(self.blocks)})
         self.load_state_dict(mine, strict=True)
 
     def forward(self, x: torch.Tensor) -> list[torch.Tensor]:

