@@ -6,6 +6,10 @@
 #      from bookworm-backports (Debian 12's own Mesa 22 is too old; see docs/platform.md).
 # A second run only checks: the venv carries a stamp of the lock file it was built from.
 # Source it (`. tools/bootstrap.sh`) to get the venv activated in the calling shell.
+# Set-up knobs, from the environment (the only MQA_* variables: what the recipes do is Hydra's config):
+#   MQA_VENV=<dir>        where the virtualenv goes (default: .venv of this checkout; one venv may serve two checkouts)
+#   MQA_MIN_FREE_GB=<n>   the free disk, in GB, asked for before installing the packages (default 9)
+#   PYTHON=<python3.11>   the interpreter that makes the virtualenv (default python3)
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 VENV="${MQA_VENV:-$ROOT/.venv}"
