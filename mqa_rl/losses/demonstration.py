@@ -10,14 +10,14 @@ and on a flat Q map over ~3,500 allowed pushes the max moves every step: measure
 its plateau (loss = margin) for 1,200 updates. ``push_cross_entropy`` is the cross-entropy of the
 softmax of Q over the allowed pushes against the demonstrated push (stops are left to the TD loss:
 with stops in the softmax, the single stop action becomes the mode and the greedy policy always
-stops): a gradient on every action (docs/notebook/policy_attempts.md: the margin, then the cross-entropy). ``stop_margin`` > 0 adds DQfD's
+stops): a gradient on every action (docs/notebook/policy.md: the margin, then the cross-entropy). ``stop_margin`` > 0 adds DQfD's
 large margin to the one decision the cross-entropy leaves out, stop or push: in a demonstrated stop
 Q(stop) must beat the best allowed push by the margin, in a demonstrated push the best push must beat
 Q(stop) by it. ``direction_weight`` > 0 adds the cross-entropy of the 8 directions' Q at the
 demonstrated push's start cell against its direction: the softmax over all pushes is dominated by
 *where* (thousands of cells), and measured on the image teacher's demonstrations the head then learnt
 where but not which way (direction at the teacher's cell at chance, 1/8); this term asks "which way,
-given where" on its own (with the rotated head: 0.35 held-out; docs/notebook/policy_attempts.md, the direction term).
+given where" on its own (with the rotated head: 0.35 held-out; docs/notebook/policy.md, the direction term).
 Demonstrated actions that the mask forbids (rare: an oracle push starting over a wall) are left out.
 """
 

@@ -4,7 +4,7 @@ lowers the targets' hidden fraction χ.
 Why: the imitation students' push branch carries to new scenes, their stop branch does not: it learnt
 "easy-looking scene -> stop" from a teacher whose pushes are better than theirs (97 % of easy
 episodes stop at once), while the same student pushing ten times keeps uncovering
-(docs/notebook/policy_attempts.md: the stop threshold, then the learned stop). When to stop is an optimal-stopping problem over the policy's *own* pushes:
+(docs/notebook/policy.md: the stop threshold, then the learned stop). When to stop is an optimal-stopping problem over the policy's *own* pushes:
 stopping at step t leaves χ_t, pushing on leaves whatever a later stop gives. ``StopCritic`` predicts
 that change of χ from what the policy sees (``stop_features``); it is fitted by
 ``mqa_rl.training.optimal_stopping`` on the policy's episodes of the training split

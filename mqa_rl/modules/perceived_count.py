@@ -4,7 +4,7 @@ Why: the stop's own features read the push policy's coarse geometry maps, which 
 targets are countable; the counting perception (``checkpoints/vqa_counting/perception.pt``) counts them
 as the VQA will. A stop critic fitted with this reading beside the shipped features left fewer targets below the
 counter's line at its stop on held-out training scenes, medium and hard beyond noise (a 5-fold refit by scene on the
-448-px perception; docs/notebook/policy_attempts.md). It reads the frame
+448-px perception; docs/notebook/policy.md). It reads the frame
 the VQA reads: the env's answer camera when the perception was trained at a finer render (the env's
 ``answer_observation``), else ``rgb``.
 

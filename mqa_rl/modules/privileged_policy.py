@@ -17,7 +17,7 @@ push direction runs from the target's visible centroid to the occluder's: every 
 image (and its segmentation), where the default reads the full silhouettes, which the camera cannot see.
 ``refine_radius=r`` then simulates the chosen push's direction from every start within r grid cells
 and takes the one that shows the targets best (the best of the 8 neighbours uncovers twice what the image
-teacher's own push does: docs/notebook/policy_attempts.md, the push landscape and the refined teacher).
+teacher's own push does: docs/notebook/policy.md, the push landscape and the refined teacher).
 ``require_gain=True`` stops instead of pushing when the best simulated push would not show the targets better
 than they show now (needs previews: ``lookahead > 1`` or ``refine_radius > 0``): with ``min_visible_fraction=0``
 (a target is served until the perfect counter's ``min_visible_px`` line) this is the countable teacher, which never

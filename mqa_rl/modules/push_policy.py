@@ -19,7 +19,7 @@ from mqa_rl.modules.push_qnet import PushQNet
 QNET_OPTIONS = {"trunk", "weights", "light_channels", "light_downsample", "fuse_channels", "question_dim", "head_channels",
                 "head_context", "coords", "depth_scale", "freeze_trunk", "class_map", "rotated_head", "geometric_push"}
 LOADED_BY_RECIPE = {"name", "masked", "pretrained", "pretrained_frozen"}   # not PushQNet arguments
-# Options removed after they did not help (docs/notebook/policy_attempts.md names the commit that has them). A
+# Options removed after they did not help (docs/notebook/policy.md names the commit that has them). A
 # saved run's config (the shipped ones included) may name them at these values, which built the same network.
 RETIRED_OPTIONS = {"target_head": False, "film": False, "geometric_stop": False, "boundary_map": False, "head_dilation": 1,
                    "perceived_classes": None}
@@ -30,7 +30,7 @@ def make_push_qnet(cfg: Mapping, *, vocab_size: int, camera_distance: float, num
     cfg = dict(cfg)
     on = sorted(f"{k}={cfg[k]}" for k in RETIRED_OPTIONS.keys() & cfg.keys() if cfg[k] != RETIRED_OPTIONS[k])
     if on:
-        raise ValueError(f"model options {on} were removed (they did not help; docs/notebook/policy_attempts.md "
+        raise ValueError(f"model options {on} were removed (they did not help; docs/notebook/policy.md "
                          f"names the commit that has them): drop them from the config")
     cfg = {k: v for k, v in cfg.items() if k not in RETIRED_OPTIONS}
     unknown = set(cfg) - QNET_OPTIONS - LOADED_BY_RECIPE

@@ -43,7 +43,7 @@ teacher's rule reads — the question's target map t, the cells' object presence
 the height map pooled per cell (mean, max, min) — while the stop branch keeps the whole state. The
 teacher pushes an object that stands higher than a visible target's part next to it, away from the
 target: a local function of t and height. A push branch that also sees the rgb features memorised the
-70 training scenes (docs/notebook/policy_attempts.md, the student trained three times longer: 47 % of pushes near the teacher's there, 5 % on new
+70 training scenes (docs/notebook/policy.md, the student trained three times longer: 47 % of pushes near the teacher's there, 5 % on new
 scenes); one that sees no appearance has nothing scene-specific to memorise.
 """
 
