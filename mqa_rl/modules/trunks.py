@@ -81,21 +81,25 @@ class EfficientLiteTrunk(EfficientLiteEncoder):
 
     Its convolutions pad as TensorFlow's "same" (a stride-2 layer pads one pixel more after than before), so
     output cell r is centred on input pixel 8r + 7, not 8r as for the ResNets: ``centre_offset`` 7 (PushQNet
-    shifts the image by 3.5 px the other way; a test checks it with input gradients)."""
+    shifts the image by 3.5 px the other way; a test checks it with input gradients).
+
+    It runs channels-last (weights and activations; the output map is returned contiguous): its depthwise and
+    1×1 convolutions take ~27 % less time forward and backward that way on CPU (batch 16, one thread)."""
 
     def __init__(self, imagenet: bool = False):
         super().__init__(last_block=LAST_BLOCK[2])
         if imagenet:
             self.load_imagenet()
         freeze_batch_norms(self)
+        self.to(memory_format=torch.channels_last)
         self.out_channels = self.blocks[-1]._project_conv.out_channels
         self.centre_offset = 7.0
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        x = self.stem(x)
+        x = self.stem(x.contiguous(memory_format=torch.channels_last))
         for block in self.blocks:
             x = block(x)
-        return x
+        return x.contiguous()
 
 
 def freeze_batch_norms(module: nn.Module) -> nn.Module:
