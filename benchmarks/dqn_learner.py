@@ -1,8 +1,9 @@
 """Learner cost of the push Q-network: one DQN update (double DQN, prioritized batch) per trunk, the
 acting forward pass, and the replay bytes per transition. Synthetic batches with the env's shapes.
 
-    python benchmarks/dqn_learner.py                          # light, resnet18, resnet101; batch 16
+    python benchmarks/dqn_learner.py                          # light, efficientnet_lite0, resnet18, resnet101; batch 16
     python benchmarks/dqn_learner.py --trunks light --batch 16 32 --threads 2
+    python benchmarks/dqn_learner.py --trunks light efficientnet_lite0 efficientnet_lite0_frozen --threads 2 --no-double-dqn
     python benchmarks/dqn_learner.py --device cuda --batch 16 64 256       # the paper-scale config on a GPU
 
 End-to-end env steps/s of the training loop come from the recipe's own log (``time/env_steps_per_s``,
@@ -46,6 +47,7 @@ MODELS = {p.stem: dict(OmegaConf.to_container(OmegaConf.load(p))) for p in sorte
 MODELS["light_full_res"] = {**MODELS["light"], "light_downsample": 1}                                     # for comparison
 MODELS["light_recognition"] = {**MODELS["light"], "class_map": True}        # the students' recognition: rgb trunk frozen
 MODELS["light_rotated"] = {**MODELS["light_recognition"], "rotated_head": True, "head_channels": [16, 16]}  # one head, 8 turns
+MODELS["efficientnet_lite0_frozen"] = {**MODELS["efficientnet_lite0"], "freeze_trunk": True}   # ImageNet trunk, heads only
 
 
 def fake_transitions(n: int, gen: torch.Generator) -> TensorDict:
@@ -74,8 +76,10 @@ def wall(device: torch.device) -> float:
     return time.perf_counter()
 
 
-def time_update(model: dict, batch: int, repeats: int, device: torch.device = torch.device("cpu")) -> tuple[float, float]:
-    """Median seconds of (one update, one acting forward of a single observation)."""
+def time_update(model: dict, batch: int, repeats: int, device: torch.device = torch.device("cpu"),
+                double_dqn: bool = True) -> tuple[float, float]:
+    """Median seconds of (one update, one acting forward of a single observation); ``double_dqn=False``: the
+    paper's target (one forward pass fewer), as the paper and paper_cpu profiles train."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         net = make_push_qnet(model, vocab_size=VOCAB, camera_distance=0.9).to(device)
@@ -83,7 +87,7 @@ def time_update(model: dict, batch: int, repeats: int, device: torch.device = to
         for p in (*net.rgb_trunk.parameters(), *net.class_head.parameters()):
             p.requires_grad_(False)
     actor = make_q_actor(net, Categorical(actions.NUM_ACTIONS))
-    loss, updater = make_dqn_loss(actor, {"gamma": 0.6, "function": "huber"})
+    loss, updater = make_dqn_loss(actor, {"gamma": 0.6, "function": "huber", "double_dqn": double_dqn})
     opt = torch.optim.Adam([p for p in loss.parameters() if p.requires_grad], lr=1e-4)
     gen = torch.Generator().manual_seed(0)
     data = compact_transitions(fake_transitions(batch, gen))
@@ -161,12 +165,15 @@ def mask_effect(dataset: str, pushes: int) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--trunks", nargs="+", default=["light", "light_recognition", "light_rotated", "light_full_res", "resnet18",
-                                                        "resnet101"])
+    ap.add_argument("--trunks", nargs="+", choices=sorted(MODELS),
+                    default=["light", "light_recognition", "light_rotated", "light_full_res", "efficientnet_lite0",
+                             "efficientnet_lite0_frozen", "resnet18", "resnet101"])
     ap.add_argument("--batch", nargs="+", type=int, default=[16])
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--threads", type=int, default=torch.get_num_threads())
     ap.add_argument("--device", default="cpu", help="where the learner runs (cuda: the GPU figures)")
+    ap.add_argument("--no-double-dqn", action="store_true",
+                    help="the paper's target (paper and paper_cpu profiles): 2 forward passes per update, not 3")
     ap.add_argument("--e2e", metavar="DATASET", help="also run the recipe briefly with 1 and 2 workers on DATASET")
     ap.add_argument("--e2e-frames", type=int, default=96)
     ap.add_argument("--mask-effect", metavar="DATASET", help="also compare random pushes with and without the mask")
@@ -178,14 +185,14 @@ def main() -> None:
     print(f"replay: {b / 1e3:.1f} kB per transition ({SIZE}² images) -> 4,000: {4000 * b / 2**30:.2f} GiB, "
           f"50,000: {50000 * b / 2**30:.1f} GiB (memmap on disk)")
     device = torch.device(args.device)
-    print(f"torch threads: {torch.get_num_threads()}, device: "
+    print(f"{'single' if args.no_double_dqn else 'double'} DQN, torch threads: {torch.get_num_threads()}, device: "
           f"{torch.cuda.get_device_name(device) if device.type == 'cuda' else 'cpu'}")
     print(f"load average before: {os.getloadavg()[0]:.2f} (the machine is shared: timings vary with it)")
     for trunk in args.trunks:
         for batch in args.batch:
             if device.type == "cuda":
                 torch.cuda.reset_peak_memory_stats(device)
-            upd, act = time_update(MODELS[trunk], batch, args.repeats, device)
+            upd, act = time_update(MODELS[trunk], batch, args.repeats, device, double_dqn=not args.no_double_dqn)
             peak = f"   peak GPU memory {torch.cuda.max_memory_allocated(device) / 2**30:.2f} GiB" if device.type == "cuda" else ""
             print(f"{trunk:>10} batch {batch:3d}: update {upd * 1e3:8.1f} ms   acting forward (1 obs) {act * 1e3:7.1f} ms{peak}")
     if args.mask_effect:
