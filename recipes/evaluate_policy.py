@@ -56,7 +56,7 @@ from mqa_rl.evaluation.reward_curves import plot_pretraining, plot_reward_curves
 from mqa_rl.evaluation.unit_reuse import content_digest, episodes_meta, greedy_identity, reuse_episodes
 from mqa_rl.evaluation.policy_units import REFERENCE_KINDS, close_envs, run_units
 from mqa_rl.files import write_atomic
-from mqa_rl.modules.kept_frame import reading_env_options
+from mqa_rl.modules.frozen_policies import reading_env_options
 from mqa_rl.modules.systems import system_spec, systems_by_id
 from mqa_rl.modules.trained_policy import newest_run_checkpoint, read_run_config
 from mqa_rl.training.policy_export import has_dashboards

@@ -28,8 +28,8 @@ from omegaconf import DictConfig, OmegaConf
 
 from mqa_rl.data.dataset import MQADataset, dataset_fingerprint
 from mqa_rl.files import write_atomic
-from mqa_rl.modules.learned_stop import policy_fingerprint, policy_net, reading_env_kwargs
-from mqa_rl.modules.perceived_count import PerceivedCount, token_channels
+from mqa_rl.modules.learned_stop import policy_fingerprint, policy_net
+from mqa_rl.modules.perceived_count import PerceivedCount, reading_env_kwargs, token_channels
 from mqa_rl.modules.stop_margin import StopMargin
 from mqa_rl.modules.trained_policy import load_greedy, read_run_config
 from mqa_rl.training.optimal_stopping import fit_stop_critic, fixed_rules, stopped_chi

@@ -40,8 +40,8 @@ from mqa_rl.data.questions import QUESTION_TYPES
 from mqa_rl.collectors.ray_pool import RayPool, check_backend, ray_session
 from mqa_rl.collectors.store import META, EpisodeStore, read_meta
 from mqa_rl.envs.sapien_bin import SapienBinEnv
-from mqa_rl.modules.frozen_policies import is_deterministic, make_frozen_policy, resolve_checkpoint
-from mqa_rl.modules.kept_frame import FrameKeeper, episode_states, reading_env_options
+from mqa_rl.modules.frozen_policies import is_deterministic, make_frozen_policy, reading_env_options, resolve_checkpoint
+from mqa_rl.modules.kept_frame import FrameKeeper, episode_states
 from mqa_rl.progress import Progress
 from mqa_rl.transforms.episode_stats import mean_target_chi
 from mqa_rl.transforms.mqa_env import make_mqa_env

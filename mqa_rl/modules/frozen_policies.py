@@ -21,8 +21,10 @@ mapping), frozen: nothing here learns.
 ``action``; run it under ``set_exploration_type(exploration_type)``. ``is_deterministic(spec)``:
 whether every rollout of a question is the same (the env replays bit-identically), in which case a
 collection needs one rollout per question. ``resolve_checkpoint(spec)`` pins a dqn spec to the run's
-newest checkpoint. The policies themselves live in their own modules (``stop_policy``, ``stop_margin``,
-``learned_stop``, ``trained_policy``, ``random_policy``, ``privileged_policy``); this file only maps specs to them.
+newest checkpoint. ``reading_env_options(spec, ...)``: the env options that the counting perception's
+readers in a spec (its ``stop_critic``, its ``kept_frame``) need. The policies themselves live in their own
+modules (``stop_policy``, ``stop_margin``, ``learned_stop``, ``trained_policy``, ``random_policy``,
+``privileged_policy``); this file only maps specs to them.
 The systems, each a spec under an id, are in one registry (``recipes/conf/systems.yaml``, read through ``systems``).
 """
 
@@ -35,7 +37,8 @@ from pathlib import Path
 from omegaconf import OmegaConf
 from torchrl.envs.utils import ExplorationType
 
-from mqa_rl.modules.learned_stop import LearnedStop
+from mqa_rl.modules.kept_frame import FrameKeeper
+from mqa_rl.modules.learned_stop import LearnedStop, stop_env_kwargs
 from mqa_rl.modules.privileged_policy import PrivilegedPushPolicy
 from mqa_rl.modules.push_policy import make_explorer
 from mqa_rl.modules.random_policy import RandomMQAPolicy
@@ -135,3 +138,22 @@ def make_frozen_policy(spec: Mapping, env, max_pushes: int):
                              masked=bool(run_cfg.action_mask))
     return explorer, ExplorationType.RANDOM
 
+
+def reading_env_options(spec: Mapping, env_kwargs: Mapping, dataset) -> dict:
+    """The env options (beside ``env_kwargs``: image_size, answer_size if any) that the counting perception's readers in
+    ``spec`` need (its ``stop_critic``, its ``kept_frame``): the answer camera at the perception's size in every
+    observation. ValueError when the env's answer camera renders another size."""
+    image_size = env_kwargs["image_size"]
+    keeper = FrameKeeper.from_file(spec["kept_frame"], dataset) if spec.get("kept_frame") else None
+    frames = {}
+    for who, needs in (("stop", stop_env_kwargs(spec.get("stop_critic"), image_size)),
+                       ("kept frame", keeper.env_kwargs(image_size) if keeper else {})):
+        size = needs.get("answer_size")
+        if size is not None and env_kwargs.get("answer_size", frames.get("answer_size", size)) != size:
+            raise ValueError(f"the policy's {who} reads the counting perception on {size}-px frames and the env's "
+                             f"answer camera renders {env_kwargs.get('answer_size', frames.get('answer_size'))} px: "
+                             f"set collection.env.answer_size={size}")
+        frames.update(needs)
+    if keeper is not None and env_kwargs.get("answer_size", frames.get("answer_size")) is not None:
+        frames["answer_observation"] = True       # the kept state's answer frame, whichever state it is
+    return frames

@@ -12,14 +12,13 @@ reuses the readings the stop left in the states (``keys.PERCEIVED_READING``) and
 from __future__ import annotations
 
 from pathlib import Path
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 
 import torch
 from tensordict import TensorDictBase
 
 from mqa_rl import keys
-from mqa_rl.modules.learned_stop import reading_env_kwargs, stop_env_kwargs
-from mqa_rl.modules.perceived_count import READING, PerceivedCount, token_channels
+from mqa_rl.modules.perceived_count import READING, PerceivedCount, reading_env_kwargs, token_channels
 
 EXPECTED = READING.index("perceived_expected")
 
@@ -78,23 +77,3 @@ def episode_states(rollout: TensorDictBase) -> list[TensorDictBase]:
     """The states of one episode's rollout [T], I_start first and the last ``next`` last: the roots, which carry what
     the policy wrote (a perceiving stop's reading), then the state the last step led to."""
     return [*rollout.unbind(0), rollout["next"][-1]]
-
-
-def reading_env_options(spec: Mapping, env_kwargs: Mapping, dataset) -> dict:
-    """The env options (beside ``env_kwargs``: image_size, answer_size if any) that the counting perception's readers in
-    ``spec`` need (its ``stop_critic``, its ``kept_frame``): the answer camera at the perception's size in every
-    observation. ValueError when the env's answer camera renders another size."""
-    image_size = env_kwargs["image_size"]
-    keeper = FrameKeeper.from_file(spec["kept_frame"], dataset) if spec.get("kept_frame") else None
-    frames = {}
-    for who, needs in (("stop", stop_env_kwargs(spec.get("stop_critic"), image_size)),
-                       ("kept frame", keeper.env_kwargs(image_size) if keeper else {})):
-        size = needs.get("answer_size")
-        if size is not None and env_kwargs.get("answer_size", frames.get("answer_size", size)) != size:
-            raise ValueError(f"the policy's {who} reads the counting perception on {size}-px frames and the env's "
-                             f"answer camera renders {env_kwargs.get('answer_size', frames.get('answer_size'))} px: "
-                             f"set collection.env.answer_size={size}")
-        frames.update(needs)
-    if keeper is not None and env_kwargs.get("answer_size", frames.get("answer_size")) is not None:
-        frames["answer_observation"] = True       # the kept state's answer frame, whichever state it is
-    return frames

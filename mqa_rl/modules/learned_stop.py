@@ -30,7 +30,7 @@ from torch import nn
 from mqa_rl import keys
 from mqa_rl.envs import actions
 from mqa_rl.files import load_versioned, save_versioned
-from mqa_rl.modules.perceived_count import READING, PerceivedCount
+from mqa_rl.modules.perceived_count import READING, PerceivedCount, reading_env_kwargs
 from mqa_rl.modules.push_qnet import PushQNet
 from mqa_rl.modules.q_override import best_allowed_push, take_action
 
@@ -156,14 +156,6 @@ class StopCritic(nn.Module):
         if source is not None:
             critic.reading = PerceivedCount.from_file(source["perception"], source["token_channel"], source["sha256"])
         return critic.eval(), dict(blob.get("meta", {}))
-
-
-def reading_env_kwargs(reading: PerceivedCount | None, image_size: int) -> dict:
-    """The env options a perceived count needs: its perception's frames in every observation (the answer camera at
-    the perception's size, when that is finer than ``image_size``); {} when it reads ``rgb`` or there is none."""
-    if reading is None or reading.input_size <= int(image_size):
-        return {}
-    return {"answer_size": reading.input_size, "answer_observation": True}
 
 
 def stop_env_kwargs(path: str | Path | None, image_size: int) -> dict:

@@ -125,3 +125,11 @@ class PerceivedCount(nn.Module):
 
     def read(self, td: TensorDictBase) -> torch.Tensor:
         return self(self.frames(td), td.get(keys.QUESTION))
+
+
+def reading_env_kwargs(reading: PerceivedCount | None, image_size: int) -> dict:
+    """The env options a perceived count needs: its perception's frames in every observation (the answer camera at
+    the perception's size, when that is finer than ``image_size``); {} when it reads ``rgb`` or there is none."""
+    if reading is None or reading.input_size <= int(image_size):
+        return {}
+    return {"answer_size": reading.input_size, "answer_observation": True}

@@ -10,10 +10,9 @@ from torchrl.data import Categorical
 
 from mqa_rl import keys
 from mqa_rl.envs import actions
-from mqa_rl.modules.learned_stop import (FEATURES, LearnedStop, StopCritic, policy_fingerprint, reading_env_kwargs,
-                                        stop_features)
+from mqa_rl.modules.learned_stop import FEATURES, LearnedStop, StopCritic, policy_fingerprint, stop_features
 from mqa_rl.modules.kept_frame import FrameKeeper
-from mqa_rl.modules.perceived_count import READING, PerceivedCount, file_sha256
+from mqa_rl.modules.perceived_count import READING, PerceivedCount, file_sha256, reading_env_kwargs
 from mqa_rl.modules.perception import CountingPerception, save_perception
 from mqa_rl.modules.vote_counting import MAX_COUNT
 from mqa_rl.modules.push_policy import make_q_actor
