@@ -21,8 +21,8 @@ from mqa_rl.data import MQADataset
 from mqa_rl.data.dataset import LEVELS
 from mqa_rl.losses.encoder_pretraining import EncoderPretrainLoss
 from mqa_rl.losses.vqa import VQALoss
-from mqa_rl.modules.vqa import VQAModel, vqa_module
-from mqa_rl.modules.vqa_encoder import FrameEncoder, PretrainHeads
+from mqa_rl.modules.answering.vqa import VQAModel, vqa_module
+from mqa_rl.modules.answering.vqa_encoder import FrameEncoder, PretrainHeads
 
 DEVICE = torch.device("cpu")
 

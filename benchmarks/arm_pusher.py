@@ -27,7 +27,7 @@ import torch
 from mqa_rl import keys
 from mqa_rl.envs import actions
 from mqa_rl.envs.sapien_bin import SapienBinEnv
-from mqa_rl.modules.random_policy import RandomMQAPolicy
+from mqa_rl.modules.push.random_policy import RandomMQAPolicy
 from mqa_rl.sim.arm_pusher import ArmPusher
 from mqa_rl.sim.geometry import BinSpec, CameraSpec
 from mqa_rl.sim.scene import build_world

@@ -38,7 +38,7 @@ from mqa_rl import keys
 from mqa_rl.collectors.replay import compact_transitions, transition_bytes
 from mqa_rl.envs import actions
 from mqa_rl.losses.dqn import make_dqn_loss
-from mqa_rl.modules.push_policy import make_push_qnet, make_q_actor
+from mqa_rl.modules.push.push_policy import make_push_qnet, make_q_actor
 from mqa_rl.sim.geometry import BinSpec, CameraSpec
 
 VOCAB, QLEN, SIZE = 120, 14, 224
@@ -145,7 +145,7 @@ def e2e(dataset: str, frames: int) -> None:
 
 def mask_effect(dataset: str, pushes: int) -> None:
     """What the action mask changes for exploration: ε-random pushes with and without it (hard scenes)."""
-    from mqa_rl.modules.random_policy import RandomMQAPolicy
+    from mqa_rl.modules.push.random_policy import RandomMQAPolicy
     from mqa_rl.transforms.mqa_env import make_mqa_env
 
     reward = OmegaConf.to_container(OmegaConf.load(Path(__file__).parents[1] / "recipes/conf/reward/global_local.yaml"))

@@ -87,7 +87,7 @@ def bench_construction(dataset: str) -> tuple[float, float]:
 def bench_collector(dataset: str, workers: int, frames: int = 40) -> float:
     from torchrl.collectors import MultiSyncCollector
 
-    from mqa_rl.modules.random_policy import RandomMQAPolicy
+    from mqa_rl.modules.push.random_policy import RandomMQAPolicy
 
     make = functools.partial(SapienBinEnv, dataset, split=None, difficulties=["hard"], max_pushes=10)
     coll = MultiSyncCollector([make] * workers, RandomMQAPolicy(10, seed=0), frames_per_batch=10 * workers,

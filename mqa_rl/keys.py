@@ -46,7 +46,8 @@ COUNTABLE_TARGETS = (REWARD_TERMS, "countable_targets")  # R_c: targets made cou
 SIMPLE_SCENE = (REWARD_TERMS, "simple_scene")          # 1.0 when the scene before the action was simple
 BETA = (REWARD_TERMS, "beta")                          # β used for this step
 
-# written by the Q-network policy (mqa_rl.modules), read by the DQN loss and the logs
+# written by the Q-network policy (mqa_rl.modules.push) and its stops (mqa_rl.modules.stop), read by the DQN loss and
+# the logs
 ACTION_VALUE = "action_value"                 # float32 [NUM_ACTIONS] Q(s, ·), masked actions at the dtype's min
 CHOSEN_ACTION_VALUE = "chosen_action_value"   # float32 [1] Q(s, a) of the chosen action
 TD_ERROR = "td_error"                         # float32 [1] squared TD error, the replay priority
@@ -91,7 +92,7 @@ SLOT_AREA = "slot_area"                       # perception crops: float32 [50] p
 OBJECT_CLASSES = "object_classes"               # perception frames: int64 [K] 1 + index into MQADataset.classes of each scene slot, 0 = empty
 CLASS_CELLS = "class_cells"                   # push-trunk pretraining frames: float16 [1 + classes, GRID, GRID] class fractions per action-grid cell (SapienBinEnv.class_cells)
 
-# the VQA (mqa_rl.modules.vqa) and its loss (mqa_rl.losses.vqa)
+# the VQA (mqa_rl.modules.answering.vqa) and its loss (mqa_rl.losses.vqa)
 FIRST_FEATURES = (FIRST, "features")          # float [C, h, w] VQAModel.encode_frames(I_start), cached when frozen
 LAST_FEATURES = (LAST, "features")
 ANSWER_LOGITS = "answer_logits"               # float32 [n_answers]

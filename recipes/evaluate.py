@@ -42,10 +42,10 @@ from mqa_rl.data.questions import QUESTION_TYPES
 from mqa_rl.evaluation import answering as ans
 from mqa_rl.evaluation import answering_report as report
 from mqa_rl.files import write_atomic
+from mqa_rl.modules.answering.vqa import CHECKPOINT_NAME, answer_size_for, load_vqa
+from mqa_rl.modules.answering.vqa_ensemble import VQAEnsemble
 from mqa_rl.modules.frozen_policies import resolve_checkpoint
 from mqa_rl.modules.systems import system_spec, table3_systems
-from mqa_rl.modules.vqa import CHECKPOINT_NAME, answer_size_for, load_vqa
-from mqa_rl.modules.vqa_ensemble import VQAEnsemble
 from mqa_rl.training.run_logger import RunLogger
 from mqa_rl.training.vqa_data import (IMAGE_KEYS, RECORD_KEYS, encode_store, encoder_fingerprint, frame_keys,
                                      load_answering_records)

@@ -58,7 +58,7 @@ from mqa_rl.evaluation.policy_units import REFERENCE_KINDS, close_envs, run_unit
 from mqa_rl.files import write_atomic
 from mqa_rl.modules.frozen_policies import reading_env_options
 from mqa_rl.modules.systems import system_spec, systems_by_id
-from mqa_rl.modules.trained_policy import newest_run_checkpoint, read_run_config
+from mqa_rl.modules.push.trained_policy import newest_run_checkpoint, read_run_config
 from mqa_rl.training.policy_export import has_dashboards
 from mqa_rl.training.run_dir import RunLock
 from mqa_rl.training.run_logger import RunLogger

@@ -31,9 +31,9 @@ from torchrl.checkpoint import Checkpoint
 
 from mqa_rl import keys
 from mqa_rl.data.dataset import dataset_fingerprint
-from mqa_rl.modules.pretrained_recognition import save_recognition
-from mqa_rl.modules.push_qnet import PushQNet
-from mqa_rl.modules.trained_policy import load_greedy, read_run_config
+from mqa_rl.modules.push.pretrained_recognition import save_recognition
+from mqa_rl.modules.push.push_qnet import PushQNet
+from mqa_rl.modules.push.trained_policy import load_greedy, read_run_config
 from mqa_rl.training.policy_export import check_export_target, export_policy, folder_bytes
 from mqa_rl.transforms.mqa_env import make_mqa_env
 

@@ -28,10 +28,10 @@ from omegaconf import DictConfig, OmegaConf
 
 from mqa_rl.data.dataset import MQADataset, dataset_fingerprint
 from mqa_rl.files import write_atomic
-from mqa_rl.modules.learned_stop import policy_fingerprint, policy_net
-from mqa_rl.modules.perceived_count import PerceivedCount, reading_env_kwargs, token_channels
-from mqa_rl.modules.stop_margin import StopMargin
-from mqa_rl.modules.trained_policy import load_greedy, read_run_config
+from mqa_rl.modules.answering.perceived_count import PerceivedCount, reading_env_kwargs, token_channels
+from mqa_rl.modules.push.trained_policy import load_greedy, read_run_config
+from mqa_rl.modules.stop.learned_stop import policy_fingerprint, policy_net
+from mqa_rl.modules.stop.stop_margin import StopMargin
 from mqa_rl.training.optimal_stopping import fit_stop_critic, fixed_rules, stopped_chi
 from mqa_rl.training.stop_trajectories import cached_trajectories, collect_trajectories, held_out, save_trajectories
 from mqa_rl.transforms.mqa_env import make_mqa_env

@@ -42,8 +42,8 @@ from mqa_rl.files import write_atomic
 from mqa_rl.losses.demonstration import DemonstrationLoss
 from mqa_rl.losses.dqn import make_dqn_loss
 from mqa_rl.losses.target_map import TargetMapLoss
-from mqa_rl.modules.pretrained_recognition import load_recognition
-from mqa_rl.modules.push_policy import RETIRED_OPTIONS, make_explorer, make_push_qnet, make_q_actor
+from mqa_rl.modules.push.pretrained_recognition import load_recognition
+from mqa_rl.modules.push.push_policy import RETIRED_OPTIONS, make_explorer, make_push_qnet, make_q_actor
 from mqa_rl.progress import Progress
 from mqa_rl.training.checkpoint import TrainingCheckpoint
 from mqa_rl.training.resume_guard import RESUMABLE, flatten, refuse_changed_config

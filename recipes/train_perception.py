@@ -14,7 +14,7 @@ radius, suppression window, probability floor, mass threshold; the density's rou
 those scenes too and writes them into the file (``calibrate_only=true``: only
 that, for a run stopped early). ``baseline=<perception.pt>`` counts another file (the shipped one, or the
 ``init_from``) on the same held-out frames, calibrated the same way: the figure to beat, in ``summary.json``.
-Writes ``out_dir/perception.pt`` (the best; ``mqa_rl.modules.perception.load_perception``),
+Writes ``out_dir/perception.pt`` (the best; ``mqa_rl.modules.answering.perception.load_perception``),
 ``checkpoints/`` (atomic, for resume=true), ``csv/`` + ``wandb/`` logs, ``config.yaml``, ``summary.json``.
 """
 
@@ -37,8 +37,8 @@ from mqa_rl.collectors.frame_records import DEPTH_SCHEMA, load_frames
 from mqa_rl.collectors.store import read_meta
 from mqa_rl.files import write_atomic
 from mqa_rl.losses.perception import PerceptionLoss, random_crop
-from mqa_rl.modules.perception import (CountingPerception, check_backbone, init_from_file, input_size, load_perception,
-                                       save_perception)
+from mqa_rl.modules.answering.perception import (CountingPerception, check_backbone, init_from_file, input_size,
+                                                 load_perception, save_perception)
 from mqa_rl.training.count_calibration import calibrate_counting, count_accuracy
 from mqa_rl.training.model_checkpoint import ModelCheckpoint
 from mqa_rl.training.resume_guard import RESUMABLE, refuse_changed_config

@@ -10,7 +10,7 @@
 Reads ``${root}/rollouts/<questions>/<system>/train`` (recipes/collect.py what=rollouts) and the counting perception
 (``perception.weights``) or, with vqa=eqa, the pretrained encoder (recipes/pretrain.py part=vqa_encoder); writes to
 ``out_dir``: ``vqa.pt`` (the model with the best accuracy on held-out training scenes: what
-``mqa_rl.modules.vqa.load_vqa`` and recipes/evaluate.py read), ``checkpoints/`` (atomic, for resume=true), ``csv/`` and ``wandb/`` logs (loss, accuracy,
+``mqa_rl.modules.answering.vqa.load_vqa`` and recipes/evaluate.py read), ``checkpoints/`` (atomic, for resume=true), ``csv/`` and ``wandb/`` logs (loss, accuracy,
 validation accuracy per level), ``config.yaml`` and ``summary.json``.
 """
 
@@ -36,7 +36,7 @@ from mqa_rl.data import MQADataset
 from mqa_rl.data.dataset import LEVELS
 from mqa_rl.files import write_atomic
 from mqa_rl.losses.vqa import VQALoss
-from mqa_rl.modules.vqa import CHECKPOINT_NAME, grounding_module, save_vqa, vqa_module
+from mqa_rl.modules.answering.vqa import CHECKPOINT_NAME, grounding_module, save_vqa, vqa_module
 from mqa_rl.modules.systems import system_spec
 from mqa_rl.training.model_checkpoint import ModelCheckpoint
 from mqa_rl.training.resume_guard import RESUMABLE, refuse_changed_config

@@ -22,7 +22,7 @@ def write_untrained_run(run: Path, dataset_dir: Path) -> Path:
 
     from mqa_rl import keys
     from mqa_rl.envs.sapien_bin import SapienBinEnv
-    from mqa_rl.modules.push_policy import make_push_qnet, make_q_actor
+    from mqa_rl.modules.push.push_policy import make_push_qnet, make_q_actor
     from mqa_rl.verified_checkpoint import INTEGRITY, IntegrityAdapter
 
     run.mkdir(parents=True)

@@ -25,7 +25,7 @@ from mqa_rl.collectors.replay import OBS_KEYS
 from mqa_rl.data.dataset import dataset_fingerprint
 from mqa_rl.envs import actions
 from mqa_rl.files import load_memmap
-from mqa_rl.modules.privileged_policy import PrivilegedPushPolicy
+from mqa_rl.modules.push.privileged_policy import PrivilegedPushPolicy
 from mqa_rl.progress import Progress
 
 DEMO_KEYS = (*OBS_KEYS, keys.TARGET_CELLS, keys.ACTION)

@@ -12,7 +12,7 @@ import torch
 from mqa_rl import keys
 from mqa_rl.envs import actions
 from mqa_rl.envs.video import episode_frames, write_video
-from mqa_rl.modules.random_policy import RandomMQAPolicy
+from mqa_rl.modules.push.random_policy import RandomMQAPolicy
 from mqa_rl.transforms.mqa_env import make_mqa_env
 
 

@@ -39,7 +39,7 @@ from mqa_rl.collectors.store import EpisodeStore
 from mqa_rl.data.dataset import LEVELS, MQADataset, dataset_fingerprint
 from mqa_rl.envs import actions
 from mqa_rl.envs.sapien_bin import MAX_OBJECTS, SapienBinEnv
-from mqa_rl.modules.perception import RENDER_SIZE, resize_depth
+from mqa_rl.modules.answering.perception import RENDER_SIZE, resize_depth
 from mqa_rl.progress import Progress
 
 

@@ -2,7 +2,8 @@
 its answer and type, scene and level, I_start and I_stop (rgb uint8, depth float16; with ``answer_size`` also the
 answer camera's finer rgb, which a VQA whose perception reads that size takes instead), the per-object
 measurements of both frames, pushes used and the targets' mean χ at start and end. A policy spec with
-``kept_frame`` stores as I_stop the state its ``FrameKeeper`` keeps (``mqa_rl.modules.kept_frame``), not the last.
+``kept_frame`` stores as I_stop the state its ``FrameKeeper`` keeps (``mqa_rl.modules.answering.kept_frame``), not
+the last.
 
     collect_rollouts("runs/answering/rollouts/counting/random/train", dataset="data/mqa",
                      policy={"kind": "random"}, split="train", question_types=["counting"], repeats=3)
@@ -41,7 +42,7 @@ from mqa_rl.collectors.ray_pool import RayPool, check_backend, ray_session
 from mqa_rl.collectors.store import META, EpisodeStore, read_meta
 from mqa_rl.envs.sapien_bin import SapienBinEnv
 from mqa_rl.modules.frozen_policies import is_deterministic, make_frozen_policy, reading_env_options, resolve_checkpoint
-from mqa_rl.modules.kept_frame import FrameKeeper, episode_states
+from mqa_rl.modules.answering.kept_frame import FrameKeeper, episode_states
 from mqa_rl.progress import Progress
 from mqa_rl.transforms.episode_stats import mean_target_chi
 from mqa_rl.transforms.mqa_env import make_mqa_env

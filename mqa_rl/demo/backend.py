@@ -28,7 +28,7 @@ from mqa_rl.demo.scenes import SceneCatalog
 from mqa_rl.demo.sessions import EnvPool, PoolBusy, SessionFiles
 from mqa_rl.demo.vqa_adapter import VQARegistry
 from mqa_rl.envs.video import write_video
-from mqa_rl.modules.perception import RENDER_SIZE
+from mqa_rl.modules.answering.perception import RENDER_SIZE
 from mqa_rl.files import write_atomic
 from mqa_rl.transforms.mqa_env import make_mqa_env
 
@@ -48,7 +48,7 @@ class DemoConfig:
     dataset: str | Path                      # a generated dataset folder (recipes/make_dataset.py)
     reward: Mapping                          # reward stack of the per-step table (recipes/conf/reward/*.yaml)
     runs: str | Path | None = "runs"         # folder searched for recipes/train_dqn.py runs
-    vqa: tuple = ()                          # VQA checkpoint paths (mqa_rl.modules.vqa.load_vqa)
+    vqa: tuple = ()                          # VQA checkpoint paths (mqa_rl.modules.answering.vqa.load_vqa)
     max_pushes: int = 10                     # pushes before an episode is cut (the env's max_pushes)
     sessions: int = 2                        # episodes running at once, one env each; others queue
     cache_dir: str | Path = "~/.cache/mqa_rl/demo"   # rendered scene images, reused by later starts

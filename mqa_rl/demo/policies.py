@@ -22,10 +22,10 @@ import torch
 from omegaconf import OmegaConf
 
 from mqa_rl import keys
-from mqa_rl.modules.learned_stop import LearnedStop, StopCritic, policy_fingerprint, policy_net
-from mqa_rl.modules.random_policy import RandomMQAPolicy
-from mqa_rl.modules.stop_policy import StopPolicy
-from mqa_rl.modules.trained_policy import load_greedy, run_checkpoints
+from mqa_rl.modules.push.random_policy import RandomMQAPolicy
+from mqa_rl.modules.push.trained_policy import load_greedy, run_checkpoints
+from mqa_rl.modules.stop.learned_stop import LearnedStop, StopCritic, policy_fingerprint, policy_net
+from mqa_rl.modules.stop.stop_policy import StopPolicy
 
 log = logging.getLogger(__name__)
 # the registry's systems the demo plays by id: those that need neither a run (found in the runs folder instead)

@@ -1,6 +1,6 @@
-"""The one place the demo touches the VQA model (``mqa_rl.modules.vqa``), through its published contract::
+"""The one place the demo touches the VQA model (``mqa_rl.modules.answering.vqa``), through its published contract::
 
-    from mqa_rl.modules.vqa import load_vqa
+    from mqa_rl.modules.answering.vqa import load_vqa
     model = load_vqa(path)              # FileNotFoundError / ValueError with a clear message
     probs = model.answer_probs(question_tokens,  # LongTensor [B, L]
                                first_rgb,        # uint8 [B, H, W, 3]
@@ -25,7 +25,7 @@ TRAIN_HINT = ("train one with `python recipes/train_vqa.py system=<name>` and st
 
 
 def _load_vqa():
-    from mqa_rl.modules.vqa import load_vqa      # lazily: without the module the demo still runs
+    from mqa_rl.modules.answering.vqa import load_vqa      # lazily: without the module the demo still runs
 
     return load_vqa
 
@@ -69,7 +69,8 @@ class VQARegistry:
             load_vqa = _load_vqa()
         except ImportError as error:
             for p in paths:
-                self.problems.append((str(p), f"the VQA module mqa_rl.modules.vqa is not in this version ({error})"))
+                self.problems.append((str(p), f"the VQA module mqa_rl.modules.answering.vqa is not in this version "
+                                              f"({error})"))
             return
         for p in paths:
             try:
@@ -94,7 +95,7 @@ class VQARegistry:
         """The answer camera the demo's env needs: the finest frames a VQA reads beyond the env's ``image_size``."""
         if not self.models:                  # none loaded (the VQA module may be absent): the env's frames only
             return None
-        from mqa_rl.modules.vqa import answer_size_for
+        from mqa_rl.modules.answering.vqa import answer_size_for
         return answer_size_for(self.models.values(), image_size)
 
     def answer(self, name: str | None, tokens, first_rgb, last_rgb, answer_frames=None) -> dict[str, float] | str:

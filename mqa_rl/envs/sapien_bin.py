@@ -28,7 +28,7 @@ Task sheet
   reads I_start / I_stop there (small targets are slivers at 224 px: docs/perception.md, "Resolution") while the
   observation, and with it the push grid, stays at ``image_size``. ``answer_observation=True`` puts that image in
   every observation as well (``answer_rgb``; ~0.2 s a state at 448 px): for a policy that reads the finer view as it
-  acts (a stop reading the counting perception, ``mqa_rl.modules.perceived_count``).
+  acts (a stop reading the counting perception, ``mqa_rl.modules.answering.perceived_count``).
 * **Reward**: always 0 here. The env measures; ``mqa_rl.transforms`` turn measurements into reward.
 
 >>> env = SapienBinEnv("data/mqa", split="train", question_types=["counting"])   # doctest: +SKIP

@@ -15,12 +15,12 @@ import torch
 from mqa_rl.collectors.ray_pool import RayPool, ray_session
 from mqa_rl.envs.qmap_overlay import qmap_episode_frames
 from mqa_rl.evaluation.rollouts import run_episodes
+from mqa_rl.modules.answering.kept_frame import FrameKeeper
 from mqa_rl.modules.frozen_policies import make_frozen_policy
-from mqa_rl.modules.kept_frame import FrameKeeper
-from mqa_rl.modules.learned_stop import LearnedStop
-from mqa_rl.modules.random_policy import RandomMQAPolicy
-from mqa_rl.modules.stop_margin import StopMargin
-from mqa_rl.modules.trained_policy import load_greedy
+from mqa_rl.modules.push.random_policy import RandomMQAPolicy
+from mqa_rl.modules.push.trained_policy import load_greedy
+from mqa_rl.modules.stop.learned_stop import LearnedStop
+from mqa_rl.modules.stop.stop_margin import StopMargin
 from mqa_rl.transforms.mqa_env import make_mqa_env
 
 # The policies a unit runs beside greedy: the registry's systems that need no run (their specs travel in the setup).

@@ -9,7 +9,7 @@ from tensordict import TensorDictBase
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 from mqa_rl.evaluation.episode_metrics import FINAL_KEYS, episode_metrics, idle_pushes, kept_frame_metrics
-from mqa_rl.modules.kept_frame import episode_states
+from mqa_rl.modules.answering.kept_frame import episode_states
 
 
 def run_episodes(env, policy, episodes: int, *, max_pushes: int, simple_threshold: float = 0.2,

@@ -12,8 +12,8 @@ from omegaconf import DictConfig
 
 from mqa_rl.data.dataset import dataset_fingerprint
 from mqa_rl.files import load_tensors
-from mqa_rl.modules.perceived_count import file_sha256
-from mqa_rl.modules.trained_policy import newest_run_checkpoint
+from mqa_rl.modules.answering.perceived_count import file_sha256
+from mqa_rl.modules.push.trained_policy import newest_run_checkpoint
 from mqa_rl.verified_checkpoint import component_digest
 
 

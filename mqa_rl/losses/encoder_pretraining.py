@@ -26,7 +26,7 @@ from tensordict.utils import NestedKey
 from torchrl.objectives import LossModule
 
 from mqa_rl import keys
-from mqa_rl.modules.vqa_encoder import FrameEncoder, PretrainHeads, standardise
+from mqa_rl.modules.answering.vqa_encoder import FrameEncoder, PretrainHeads, standardise
 
 
 class EncoderPretrainLoss(LossModule):

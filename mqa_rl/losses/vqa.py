@@ -1,14 +1,14 @@
 """``VQALoss``: cross-entropy of the VQA's answer logits against the oracle answer, as a TorchRL
 ``LossModule``; it also reports the batch's accuracy (not differentiated).
 
-    loss = VQALoss(vqa_module(model))                  # mqa_rl.modules.vqa.vqa_module
+    loss = VQALoss(vqa_module(model))                  # mqa_rl.modules.answering.vqa.vqa_module
     out = loss(batch)                                  # batch: question, both frames, answer_label
     out["loss_vqa"].backward(); out["accuracy"]
 
 The keys it reads are declared once in ``_AcceptedKeys`` (rename with ``loss.set_keys(answer=...)``).
 ``label_smoothing`` (0 by default) spreads a little target mass over the other answers.
 
-``grounding`` (a module writing ``GROUNDING_LOGITS``: ``mqa_rl.modules.vqa.grounding_module``) adds
+``grounding`` (a module writing ``GROUNDING_LOGITS``: ``mqa_rl.modules.answering.vqa.grounding_module``) adds
 ``loss_grounding``: cross-entropy of each of the first heads' class choice against the classes the
 question names (``QUESTION_CLASSES``: head h ↔ the h-th class), times ``grounding_weight``, and reports
 ``grounding_accuracy``. The question's classes are part of the dataset (its programs), like the

@@ -10,12 +10,12 @@ mapping), frozen: nothing here learns.
                                             stop_critic: <recipes/fit_stop.py out_dir> stops as it predicts;
                                             push_memory: r (default the run's env.push_memory; < 0: none) runs it
                                             in an env with PushMemory(r), as it was trained (``make_mqa_env(push_memory=r)``)
-    {kind: privileged, lookahead: 1}        the oracle reference (reads the simulator; see privileged_policy;
+    {kind: privileged, lookahead: 1}        the oracle reference (reads the simulator; see push.privileged_policy;
                                             order: visible_first, geometry: visible = the image teacher;
                                             refine_radius, require_gain: the refined and countable teachers)
     any kind, kept_frame: <perception.pt>   I_stop is the frame of the episode where that counting perception reads
-                                            the most of the asked class, not the last (``kept_frame.FrameKeeper``;
-                                            the rollout collector applies it)
+                                            the most of the asked class, not the last
+                                            (``answering.kept_frame.FrameKeeper``; the rollout collector applies it)
 
 ``make_frozen_policy(spec, env)`` returns ``(policy, exploration_type)``: ``policy(td)`` writes
 ``action``; run it under ``set_exploration_type(exploration_type)``. ``is_deterministic(spec)``:
@@ -23,8 +23,8 @@ whether every rollout of a question is the same (the env replays bit-identically
 collection needs one rollout per question. ``resolve_checkpoint(spec)`` pins a dqn spec to the run's
 newest checkpoint. ``reading_env_options(spec, ...)``: the env options that the counting perception's
 readers in a spec (its ``stop_critic``, its ``kept_frame``) need. The policies themselves live in their own
-modules (``stop_policy``, ``stop_margin``, ``learned_stop``, ``trained_policy``, ``random_policy``,
-``privileged_policy``); this file only maps specs to them.
+modules (``push.trained_policy``, ``push.random_policy``, ``push.privileged_policy``; ``stop.stop_policy``,
+``stop.stop_margin``, ``stop.learned_stop``; ``answering.kept_frame``); this file only maps specs to them.
 The systems, each a spec under an id, are in one registry (``recipes/conf/systems.yaml``, read through ``systems``).
 """
 
@@ -37,14 +37,14 @@ from pathlib import Path
 from omegaconf import OmegaConf
 from torchrl.envs.utils import ExplorationType
 
-from mqa_rl.modules.kept_frame import FrameKeeper
-from mqa_rl.modules.learned_stop import LearnedStop, stop_env_kwargs
-from mqa_rl.modules.privileged_policy import PrivilegedPushPolicy
-from mqa_rl.modules.push_policy import make_explorer
-from mqa_rl.modules.random_policy import RandomMQAPolicy
-from mqa_rl.modules.stop_margin import StopMargin
-from mqa_rl.modules.stop_policy import StopPolicy
-from mqa_rl.modules.trained_policy import load_greedy, newest_run_checkpoint
+from mqa_rl.modules.answering.kept_frame import FrameKeeper
+from mqa_rl.modules.push.privileged_policy import PrivilegedPushPolicy
+from mqa_rl.modules.push.push_policy import make_explorer
+from mqa_rl.modules.push.random_policy import RandomMQAPolicy
+from mqa_rl.modules.push.trained_policy import load_greedy, newest_run_checkpoint
+from mqa_rl.modules.stop.learned_stop import LearnedStop, stop_env_kwargs
+from mqa_rl.modules.stop.stop_margin import StopMargin
+from mqa_rl.modules.stop.stop_policy import StopPolicy
 from mqa_rl.transforms.push_memory import memory_radius
 
 KINDS = ("random", "random_masked", "none", "dqn", "privileged")

@@ -13,8 +13,8 @@ import torch
 from mqa_rl import keys
 from mqa_rl.data.dataset import LEVELS
 from mqa_rl.losses.perception import countable_counts
-from mqa_rl.modules import vote_counting
-from mqa_rl.modules.perception import CountingPerception
+from mqa_rl.modules.answering import vote_counting
+from mqa_rl.modules.answering.perception import CountingPerception
 
 # the counting settings tried on held-out pretraining scenes (vote_counting.DEFAULT_COUNTING: what they mean)
 CALIBRATION_GRID = {"radius": (2.5, 4.0), "nms": (5, 9), "min_prob": (0.05, 0.3), "min_px": (12, 16, 20, 28, 36),

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import torch
 
-from mqa_rl.modules.learned_stop import StopCritic
+from mqa_rl.modules.stop.learned_stop import StopCritic
 
 
 def realised_values(chi: torch.Tensor, stop: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:

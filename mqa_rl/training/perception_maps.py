@@ -11,7 +11,7 @@ import numpy as np
 import torch
 
 from mqa_rl import keys
-from mqa_rl.modules.perception import CountingPerception
+from mqa_rl.modules.answering.perception import CountingPerception
 
 TILE = 160
 

@@ -39,8 +39,8 @@ from mqa_rl.data import MQADataset
 from mqa_rl.envs.sapien_bin import SapienBinEnv
 from mqa_rl.files import load_memmap, write_atomic
 from mqa_rl.losses.class_cells import ClassCellsLoss
-from mqa_rl.modules.pretrained_recognition import load_recognition, save_recognition
-from mqa_rl.modules.push_policy import make_push_qnet
+from mqa_rl.modules.push.pretrained_recognition import load_recognition, save_recognition
+from mqa_rl.modules.push.push_policy import make_push_qnet
 from mqa_rl.training.run_logger import RunLogger
 from mqa_rl.training.vqa_data import scene_split
 from mqa_rl.envs.dihedral import random_dihedral_in

@@ -13,8 +13,8 @@ import torch
 
 from mqa_rl import keys
 from mqa_rl.files import load_tensors, write_atomic
-from mqa_rl.modules.learned_stop import FEATURES, stop_features
-from mqa_rl.modules.perceived_count import READING, PerceivedCount
+from mqa_rl.modules.answering.perceived_count import READING, PerceivedCount
+from mqa_rl.modules.stop.learned_stop import FEATURES, stop_features
 from mqa_rl.transforms.episode_stats import mean_target_chi, uncountable_share
 
 

@@ -10,9 +10,9 @@ from omegaconf import DictConfig
 
 from mqa_rl.data import MQADataset
 from mqa_rl.data.dataset import dataset_fingerprint
-from mqa_rl.modules.perception import check_library, load_perception
-from mqa_rl.modules.vqa import VQAModel, load_vqa
-from mqa_rl.modules.vqa_encoder import load_encoder
+from mqa_rl.modules.answering.perception import check_library, load_perception
+from mqa_rl.modules.answering.vqa import VQAModel, load_vqa
+from mqa_rl.modules.answering.vqa_encoder import load_encoder
 
 # the vqa config's keys that are the model's architecture
 MODEL_OPTIONS = ("pool", "image_size", "dim", "lstm_layers", "dropout", "cell_heads", "frame_fusion")

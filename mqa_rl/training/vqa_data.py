@@ -30,7 +30,7 @@ from mqa_rl.collectors.store import SCENE_OFFSET, chunk_paths, load_records, rea
 from mqa_rl.data import MQADataset
 from mqa_rl.data.dataset import dataset_fingerprint
 from mqa_rl.files import write_atomic
-from mqa_rl.modules.vqa import split_repeats
+from mqa_rl.modules.answering.vqa import split_repeats
 from mqa_rl.envs.dihedral import dihedral, random_dihedral_in
 
 RECORD_KEYS = (keys.QUESTION, keys.ANSWER_LABEL, keys.TYPE_LABEL, keys.LEVEL, keys.SCENE, keys.QUESTION_ID,

@@ -27,7 +27,7 @@ from mqa_rl.data import MQADataset
 from mqa_rl.data.dataset import dataset_fingerprint
 from mqa_rl.files import write_atomic
 from mqa_rl.losses.encoder_pretraining import EncoderPretrainLoss
-from mqa_rl.modules.vqa_encoder import FrameEncoder, PretrainHeads, save_encoder
+from mqa_rl.modules.answering.vqa_encoder import FrameEncoder, PretrainHeads, save_encoder
 from mqa_rl.training.frame_pack import load_frame_pack, save_frame_pack
 from mqa_rl.training.model_checkpoint import ModelCheckpoint
 from mqa_rl.training.run_logger import RunLogger, trim_scalars

@@ -13,8 +13,8 @@ from torchrl.data import Categorical
 
 from conftest import REPO, compose_recipe_config
 from mqa_rl.data.objects import CLASS_NAMES
-from mqa_rl.modules.pretrained_recognition import load_recognition
-from mqa_rl.modules.push_policy import make_push_qnet, make_q_actor
+from mqa_rl.modules.push.pretrained_recognition import load_recognition
+from mqa_rl.modules.push.push_policy import make_push_qnet, make_q_actor
 from mqa_rl.training.resume_guard import flatten
 from mqa_rl.sim.geometry import CAMERA_DISTANCE
 

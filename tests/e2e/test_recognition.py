@@ -15,8 +15,8 @@ import torch
 from mqa_rl import keys
 from mqa_rl.envs import actions
 from mqa_rl.losses.class_cells import ClassCellsLoss
-from mqa_rl.modules.pretrained_recognition import load_recognition, save_recognition
-from mqa_rl.modules.push_qnet import PushQNet
+from mqa_rl.modules.push.pretrained_recognition import load_recognition, save_recognition
+from mqa_rl.modules.push.push_qnet import PushQNet
 from torch_threads import one_torch_thread  # noqa: F401  (autouse)
 
 from conftest import REPO as ROOT
@@ -252,7 +252,7 @@ def test_pretrain_then_train_dqn_from_the_recognition_file(small_dataset_dir, tm
     assert (figures / "fig7_rewards_pretraining.png").stat().st_size > 0 and (figures / "fig7_rewards.png").stat().st_size > 0
     # the frozen recognition is unchanged by DQN training, and the trained policy loads for evaluation
     from mqa_rl.envs.sapien_bin import SapienBinEnv
-    from mqa_rl.modules.trained_policy import load_greedy
+    from mqa_rl.modules.push.trained_policy import load_greedy
 
     actor, _, _ = load_greedy(run, None, SapienBinEnv(small_dataset_dir, split="test"))
     net = actor.module[0].module if hasattr(actor.module[0], "module") else None
@@ -297,7 +297,7 @@ def test_pretrain_then_train_dqn_from_the_recognition_file(small_dataset_dir, tm
     assert out.returncode == 0, out.stderr[-3000:]
     assert json.loads((ev / "results.json").read_text())["hard"]["greedy"]["pushes"]["n"] == 2
     from mqa_rl.modules.frozen_policies import make_frozen_policy
-    from mqa_rl.modules.learned_stop import LearnedStop
+    from mqa_rl.modules.stop.learned_stop import LearnedStop
 
     spec = {"kind": "dqn", "run": str(tmp_path / "geometric"), "stop_critic": str(tmp_path / "stop")}
     policy, _ = make_frozen_policy(spec, SapienBinEnv(small_dataset_dir, split="test"), max_pushes=3)
@@ -312,8 +312,8 @@ def test_pretrain_then_train_dqn_from_the_recognition_file(small_dataset_dir, tm
     # camera in every state, the critic's file names the perception, a collection of its system runs with those frames
     from mqa_rl.collectors.rollouts import collect_rollouts
     from mqa_rl.data.dataset import MQADataset
-    from mqa_rl.modules.learned_stop import StopCritic
-    from mqa_rl.modules.perception import CountingPerception, save_perception
+    from mqa_rl.modules.answering.perception import CountingPerception, save_perception
+    from mqa_rl.modules.stop.learned_stop import StopCritic
 
     classes = len(MQADataset(small_dataset_dir).classes)
     perception = save_perception(CountingPerception(1 + classes, widths=(8, 8, 16, 16), image_size=448),

@@ -224,7 +224,7 @@ def test_collector_workers_shut_down_when_the_loop_fails(small_dataset_dir):
     import torch
 
     from mqa_rl.collectors.factory import make_collector, running
-    from mqa_rl.modules.random_policy import RandomMQAPolicy
+    from mqa_rl.modules.push.random_policy import RandomMQAPolicy
 
     env_kwargs = {"dataset": str(small_dataset_dir), "split": None, "difficulties": ["easy"], "max_pushes": 2}
     coll = make_collector({"kind": "multi_sync", "num_workers": 2, "frames_per_batch": 4, "learner_threads": 1},
@@ -255,7 +255,7 @@ def test_collector_workers_act_with_the_synced_weights(small_dataset_dir):
     from mqa_rl import keys
     from mqa_rl.collectors.factory import make_collector, running
     from mqa_rl.envs import actions
-    from mqa_rl.modules.push_policy import make_explorer, make_push_qnet, make_q_actor
+    from mqa_rl.modules.push.push_policy import make_explorer, make_push_qnet, make_q_actor
     from torchrl.data import Categorical
 
     torch.manual_seed(0)
@@ -298,8 +298,8 @@ def test_init_from_starts_a_new_phase_or_run_and_refuses_what_does_not_fit(small
 
     from conftest import compose_recipe_config, load_recipe
     from mqa_rl.envs.sapien_bin import SapienBinEnv
-    from mqa_rl.modules.push_qnet import PushQNet
-    from mqa_rl.modules.trained_policy import load_greedy
+    from mqa_rl.modules.push.push_qnet import PushQNet
+    from mqa_rl.modules.push.trained_policy import load_greedy
 
     train_dqn, export = load_recipe("train_dqn"), load_recipe("export_policy")
 

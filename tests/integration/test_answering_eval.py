@@ -16,7 +16,7 @@ from torch_threads import one_torch_thread  # noqa: F401  (autouse)
 
 from mqa_rl import keys
 from mqa_rl.evaluation import answering as ans
-from mqa_rl.modules.vqa import VQAModel, save_vqa
+from mqa_rl.modules.answering.vqa import VQAModel, save_vqa
 
 
 def test_statistics():
@@ -147,8 +147,8 @@ def test_evaluate_writes_table3_and_names_what_is_missing(small_dataset, trained
 def test_evaluate_answers_with_the_mean_of_several_vqa_seeds(small_dataset, trained):
     """vqa_dir=[a, b]: every record answered by the argmax of the two VQAs' mean probabilities; a VQA of another
     vocabulary cannot join the ensemble."""
-    from mqa_rl.modules.vqa import load_vqa
-    from mqa_rl.modules.vqa_ensemble import VQAEnsemble
+    from mqa_rl.modules.answering.vqa import load_vqa
+    from mqa_rl.modules.answering.vqa_ensemble import VQAEnsemble
     from mqa_rl.training.vqa_data import load_answering_records
 
     root, overrides = trained
@@ -251,7 +251,7 @@ def test_evaluate_collects_the_answer_cameras_frames_a_finer_vqa_reads(small_dat
     and answers from its frames; a store of 224-px frames only is reported missing with the command that fixes it.
     The perception's features are kept beside the test store: answered from them as from the frames, and a second
     evaluation runs no perception."""
-    from mqa_rl.modules.perception import CountingPerception
+    from mqa_rl.modules.answering.perception import CountingPerception
     root, overrides = answering_root
     perception = CountingPerception(1 + len(small_dataset.classes), widths=(8, 8, 16, 16), image_size=448)
     model = VQAModel(small_dataset.vocab.itos, small_dataset.answers, pool="counts", cell_heads=2,
@@ -269,7 +269,7 @@ def test_evaluate_collects_the_answer_cameras_frames_a_finer_vqa_reads(small_dat
     store = tmp_path / "rollouts" / "no_manipulation" / "test"
     meta = json.loads((store / "meta.json").read_text())
     assert meta["env"]["answer_size"] == 448
-    from mqa_rl.modules.vqa import load_vqa
+    from mqa_rl.modules.answering.vqa import load_vqa
     from mqa_rl.training.vqa_data import encode_store, encoder_fingerprint, load_answering_records
     assert len(list((store / "features").iterdir())) == 1
     loaded = load_vqa(tmp_path / "vqa" / "no_manipulation")

@@ -236,7 +236,7 @@ def test_a_vqa_reading_finer_frames_gets_the_answer_cameras_and_others_the_envs(
     carries its I_start / I_stop, which that VQA reads, while a 224-px VQA reads the env's frames."""
     from mqa_rl.demo import vqa_adapter
     from mqa_rl.demo.episode import play
-    from mqa_rl.modules.random_policy import RandomMQAPolicy
+    from mqa_rl.modules.push.random_policy import RandomMQAPolicy
     from mqa_rl.transforms.mqa_env import make_mqa_env
 
     fine, coarse = StandInVQA(), StandInVQA()
@@ -276,7 +276,7 @@ def test_vqa_problems_are_reported_not_raised(monkeypatch):
 
     from mqa_rl.demo import vqa_adapter
 
-    monkeypatch.setitem(sys.modules, "mqa_rl.modules.vqa", None)         # the module absent
+    monkeypatch.setitem(sys.modules, "mqa_rl.modules.answering.vqa", None)         # the module absent
     registry = vqa_adapter.VQARegistry(["some/checkpoint"])
     assert not registry.names and "not in this version" in registry.missing_reason()
     assert registry.answer(None, None, None, None).startswith("no VQA checkpoint")
@@ -310,7 +310,7 @@ def test_the_shipped_checkpoints_folder_offers_every_policy_and_the_students_lea
     critics (matched by the weights' fingerprint), and the VQA / encoder / recognition folders passed over, not listed as unusable;
     the student with its stop plays an episode that ends with the stop action or the push budget."""
     from mqa_rl.demo.policies import PolicyRegistry
-    from mqa_rl.modules.learned_stop import LearnedStop
+    from mqa_rl.modules.stop.learned_stop import LearnedStop
     from mqa_rl.transforms.mqa_env import make_mqa_env
 
     root = REPO

@@ -9,7 +9,7 @@ from tensordict import TensorDict
 from mqa_rl import keys
 from mqa_rl.envs import actions
 from mqa_rl.losses.demonstration import DemonstrationLoss
-from mqa_rl.modules.push_qnet import PushQNet
+from mqa_rl.modules.push.push_qnet import PushQNet
 from mqa_rl.envs.dihedral import DihedralAugment, transform_action
 from torch_threads import one_torch_thread  # noqa: F401  (autouse)
 
@@ -124,7 +124,7 @@ def test_push_cross_entropy_learns_demonstrated_pushes_and_leaves_stops_to_td():
 def test_visible_first_oracle_serves_partly_visible_targets_first(small_dataset):
     import numpy as np
 
-    from mqa_rl.modules.privileged_policy import PrivilegedPushPolicy
+    from mqa_rl.modules.push.privileged_policy import PrivilegedPushPolicy
 
     checked = 0
     for env, gt in _hard_scene_truths(small_dataset):
@@ -166,7 +166,7 @@ def test_smoothed_push_target_spreads_over_nearby_allowed_starts_of_the_same_dir
 
 
 def test_the_image_teacher_only_serves_targets_the_image_shows(small_dataset):
-    from mqa_rl.modules.privileged_policy import PrivilegedPushPolicy
+    from mqa_rl.modules.push.privileged_policy import PrivilegedPushPolicy
 
     served = 0
     for env, gt in _hard_scene_truths(small_dataset):
@@ -223,7 +223,7 @@ def test_visible_geometry_oracle_reads_only_what_the_image_shows(small_dataset):
 
     import numpy as np
 
-    from mqa_rl.modules.privileged_policy import PrivilegedPushPolicy
+    from mqa_rl.modules.push.privileged_policy import PrivilegedPushPolicy
 
     served = 0
     for env, gt in _hard_scene_truths(small_dataset):

@@ -210,7 +210,7 @@ def test_episode_video_mp4_and_gif(env, tmp_path):
     import cv2
 
     from mqa_rl.envs.video import episode_frames, write_video
-    from mqa_rl.modules.random_policy import RandomMQAPolicy
+    from mqa_rl.modules.push.random_policy import RandomMQAPolicy
 
     r = env.rollout(4, RandomMQAPolicy(3, seed=2))
     frames = episode_frames(r, env.camera, env.question.text)

@@ -12,10 +12,10 @@ from mqa_rl.collectors.perception_frames import check_disjoint, scene_fingerprin
 from mqa_rl.collectors.store import load_records
 from mqa_rl.losses.perception import (PerceptionLoss, countable_counts, crop_counts, perception_targets, random_crop,
                                      slot_pixels)
-from mqa_rl.modules import vote_counting
-from mqa_rl.modules.perception import CountingPerception, init_from_file, load_perception, save_perception
-from mqa_rl.modules.vqa_ensemble import VQAEnsemble
-from mqa_rl.modules.vqa import VQAModel, load_vqa, save_vqa
+from mqa_rl.modules.answering import vote_counting
+from mqa_rl.modules.answering.perception import CountingPerception, init_from_file, load_perception, save_perception
+from mqa_rl.modules.answering.vqa_ensemble import VQAEnsemble
+from mqa_rl.modules.answering.vqa import VQAModel, load_vqa, save_vqa
 from mqa_rl.training.count_calibration import count_accuracy_table
 from mqa_rl.transforms.episode_stats import COUNTABLE_PX
 
@@ -171,7 +171,7 @@ def test_perception_file_round_trip_and_refusals(tmp_path):
 
 
 def test_a_perception_of_another_object_library_is_refused_at_load_by_its_readers(small_dataset, tmp_path):
-    from mqa_rl.modules.kept_frame import FrameKeeper
+    from mqa_rl.modules.answering.kept_frame import FrameKeeper
 
     other = save_perception(CountingPerception(1 + 4, widths=(8, 8, 16, 16)), tmp_path / "four.pt", {})
     with pytest.raises(ValueError, match=r"knows 4 classes, the dataset 20: train one"):
@@ -452,7 +452,7 @@ def test_the_detail_path_reads_the_full_render_and_warm_starts_from_a_file_witho
 
 
 def test_the_imagenet_backbone_loads_the_wheels_weights_and_round_trips(tmp_path):
-    from mqa_rl.modules.imagenet_backbone import imagenet_weights_path
+    from mqa_rl.modules.push.imagenet_backbone import imagenet_weights_path
     torch.manual_seed(0)
     scratch = CountingPerception(K, widths=(8, 8, 16, 16), backbone="efficientnet_lite0")
     assert scratch.input_size == 224 and scratch.out_size == 56 and scratch.cell_px == 16.0

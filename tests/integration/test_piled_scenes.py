@@ -14,7 +14,7 @@ from mqa_rl.data.object_sizes import REAL_LENGTH
 from mqa_rl.data.objects import make_object
 from mqa_rl.envs import actions
 from mqa_rl.envs.sapien_bin import SapienBinEnv
-from mqa_rl.modules.privileged_policy import PrivilegedPushPolicy
+from mqa_rl.modules.push.privileged_policy import PrivilegedPushPolicy
 
 
 @pytest.mark.parametrize("class_name", sorted(REAL_LENGTH))

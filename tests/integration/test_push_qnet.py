@@ -9,9 +9,9 @@ from torchrl.data import Categorical
 
 from mqa_rl import keys
 from mqa_rl.envs import actions
-from mqa_rl.modules.push_policy import make_explorer, make_push_qnet, make_q_actor
-from mqa_rl.modules.push_qnet import PushQNet
-from mqa_rl.modules.trunks import TrunkWeightsError, make_trunk
+from mqa_rl.modules.push.push_policy import make_explorer, make_push_qnet, make_q_actor
+from mqa_rl.modules.push.push_qnet import PushQNet
+from mqa_rl.modules.push.trunks import TrunkWeightsError, make_trunk
 from mqa_rl.sim.geometry import BinSpec, CameraSpec
 from torch_threads import one_torch_thread  # noqa: F401  (autouse)
 
@@ -184,7 +184,7 @@ def test_trunk_weights_files(tmp_path):
 def test_efficientnet_lite0_trunk_has_the_wheels_imagenet_weights_and_fixed_batch_norms():
     from torchvision.ops.misc import FrozenBatchNorm2d
 
-    from mqa_rl.modules.imagenet_backbone import imagenet_weights_path
+    from mqa_rl.modules.push.imagenet_backbone import imagenet_weights_path
 
     trunk = make_trunk("efficientnet_lite0", "imagenet")
     x = torch.randn(2, 3, S, S, generator=torch.Generator().manual_seed(0))
@@ -233,7 +233,7 @@ def test_efficientnet_lite0_q_network_learns_its_heads_with_the_trunk_frozen():
 
 def test_rotated_head_is_equivariant_to_quarter_turns():
     """Turning the state 90° counter-clockwise (as seen) turns Q of direction d into direction d + 2."""
-    from mqa_rl.modules.rotated_head import RotatedPushHead
+    from mqa_rl.modules.push.rotated_head import RotatedPushHead
 
     torch.manual_seed(0)
     head = RotatedPushHead(6, (8, 8), context=2).eval()
@@ -250,7 +250,7 @@ def test_rotated_head_is_equivariant_to_quarter_turns():
 def test_rotated_head_pushes_right_unrotated_and_up_as_a_quarter_turn():
     """Direction 0 (right) is the shared head on the state as it is; direction 2 (up, 90° counter-clockwise
     in the image, the env's convention) is that head on the state turned so that up points right."""
-    from mqa_rl.modules.rotated_head import RotatedPushHead
+    from mqa_rl.modules.push.rotated_head import RotatedPushHead
 
     torch.manual_seed(1)
     head = RotatedPushHead(4, (8, 8), context=1).eval()

@@ -119,7 +119,7 @@ def _fake_dqn_run(run, env):
     """A train_dqn.py output folder with an untrained light Q-network checkpoint."""
     from torchrl.checkpoint import Checkpoint, CheckpointRotation
 
-    from mqa_rl.modules.push_policy import make_push_qnet, make_q_actor
+    from mqa_rl.modules.push.push_policy import make_push_qnet, make_q_actor
     from mqa_rl.verified_checkpoint import INTEGRITY, IntegrityAdapter
 
     model = OmegaConf.load(REPO / "recipes" / "conf" / "trunk" / "light.yaml")
@@ -256,8 +256,8 @@ def test_the_answer_observation_puts_the_answer_cameras_frame_in_every_state(sma
 
 def test_each_asked_class_has_a_token_that_names_it(small_dataset):
     """The perceived count finds the asked class from the question's tokens alone (``token_channels``)."""
-    from mqa_rl.modules.perceived_count import PerceivedCount, token_channels
-    from mqa_rl.modules.perception import CountingPerception
+    from mqa_rl.modules.answering.perceived_count import PerceivedCount, token_channels
+    from mqa_rl.modules.answering.perception import CountingPerception
     table = token_channels(small_dataset)
     reading = PerceivedCount(CountingPerception(1 + len(small_dataset.classes), widths=(8, 8, 16, 16)), table)
     single = [q for q in small_dataset.questions if len(q.classes) == 1]
@@ -270,9 +270,9 @@ def test_a_kept_frame_is_the_episodes_state_the_perception_reads_most_in(small_d
     """``kept_frame``: I_stop is the state where the counting perception's expected count of the asked class is
     highest (ties: the later), with that state's measurements (its object map counts its visible areas) and answer
     frame; I_start and the pushes are the episode's, as without it. A missing file and a non-path are refused."""
-    from mqa_rl.modules.kept_frame import FrameKeeper
-    from mqa_rl.modules.perception import CountingPerception, save_perception
-    from mqa_rl.modules.perceived_count import READING
+    from mqa_rl.modules.answering.kept_frame import FrameKeeper
+    from mqa_rl.modules.answering.perception import CountingPerception, save_perception
+    from mqa_rl.modules.answering.perceived_count import READING
     torch.manual_seed(0)
     path = save_perception(CountingPerception(1 + len(small_dataset.classes), widths=(8, 8, 16, 16)),
                            tmp_path / "perception.pt", {})
@@ -305,9 +305,9 @@ def test_a_kept_frame_is_the_episodes_state_the_perception_reads_most_in(small_d
 
 
 def test_the_frame_keeper_keeps_the_highest_reading_and_the_later_of_equals(small_dataset):
-    from mqa_rl.modules.kept_frame import FrameKeeper
-    from mqa_rl.modules.perceived_count import READING, PerceivedCount, token_channels
-    from mqa_rl.modules.perception import CountingPerception
+    from mqa_rl.modules.answering.kept_frame import FrameKeeper
+    from mqa_rl.modules.answering.perceived_count import READING, PerceivedCount, token_channels
+    from mqa_rl.modules.answering.perception import CountingPerception
     torch.manual_seed(0)
     keeper = FrameKeeper(PerceivedCount(CountingPerception(1 + len(small_dataset.classes), widths=(8, 8, 16, 16)),
                                         token_channels(small_dataset)))
@@ -331,8 +331,8 @@ def test_evaluate_policy_reports_the_counter_on_the_frame_kept(small_dataset_dir
     ``countable_gain_kept``: nothing gained on the first frame, the episode's ``countable_gain`` on the last; and
     ``chi_kept`` / ``hidden_kept``: the start's χ on the first frame, ``chi_end`` / ``hidden_end`` on the last."""
     from mqa_rl.evaluation import policy_units
-    from mqa_rl.modules.kept_frame import FrameKeeper
-    from mqa_rl.modules.perception import CountingPerception, save_perception
+    from mqa_rl.modules.answering.kept_frame import FrameKeeper
+    from mqa_rl.modules.answering.perception import CountingPerception, save_perception
     path = save_perception(CountingPerception(1 + len(small_dataset.classes), widths=(8, 8, 16, 16)),
                            tmp_path / "perception.pt", {})
     setup = {"dataset": str(small_dataset_dir), "split": "train", "qtypes": ["counting"], "max_pushes": 3,

@@ -90,7 +90,7 @@ def test_stop_in_simple_scene_plus_one_cluttered_minus_one(env, small_dataset):
 def test_push_that_uncovers_a_target_gives_positive_local_reward(env, small_dataset):
     """Try the privileged oracle's candidate pushes on partly hidden targets until one reveals the
     most hidden one; R_l, and the reward mix, must then be exactly the formulas'."""
-    from mqa_rl.modules.privileged_policy import PrivilegedPushPolicy
+    from mqa_rl.modules.push.privileged_policy import PrivilegedPushPolicy
 
     oracle = PrivilegedPushPolicy(env.base_env)
     hard = [q for q in small_dataset.select(types="counting", difficulties="hard") if q.answer != "0"]
@@ -167,7 +167,7 @@ def test_factory_rejects_bad_configs_and_accepts_new_terms(base):
 def test_beta_counter_reaches_collector_workers(small_dataset_dir):
     from torchrl.collectors import MultiSyncCollector
 
-    from mqa_rl.modules.random_policy import RandomMQAPolicy
+    from mqa_rl.modules.push.random_policy import RandomMQAPolicy
 
     counter = torch.zeros((), dtype=torch.int64).share_memory_()
     kwargs = {"dataset": str(small_dataset_dir), "reward": reward_cfg("local"), "counter": counter,

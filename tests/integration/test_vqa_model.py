@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from mqa_rl.data.vocab import Vocabulary
-from mqa_rl.modules.vqa import VQAModel, load_vqa, save_vqa
+from mqa_rl.modules.answering.vqa import VQAModel, load_vqa, save_vqa
 from conftest import REPO
 
 VOCAB = Vocabulary.build(["How many cans are there in the bin?", "Is there a can in the bin?",
@@ -170,7 +170,7 @@ def test_the_demos_default_vqas_load_and_answer_a_counting_question(small_datase
 def test_the_shipped_encoders_load_and_encode(name, head_width):
     """checkpoints/vqa_encoder{,_scenes}: what `encoder.weights=` points users at loads as the encoder it was
     pretrained as (the scenes one with its context heads) and gives the VQA's bottleneck and class maps."""
-    from mqa_rl.modules.vqa_encoder import load_encoder, standardise
+    from mqa_rl.modules.answering.vqa_encoder import load_encoder, standardise
 
     encoder, meta = load_encoder(REPO / "checkpoints" / name / "encoder.pt")
     assert encoder.head_width == head_width and encoder.out_shape == (32, 10, 10)

@@ -14,8 +14,8 @@ from mqa_rl import keys
 from mqa_rl.data.vocab import Vocabulary
 from mqa_rl.losses.encoder_pretraining import EncoderPretrainLoss
 from mqa_rl.losses.vqa import VQALoss
-from mqa_rl.modules.vqa import VQAModel, image_digest, load_vqa, vqa_module
-from mqa_rl.modules.vqa_encoder import FrameEncoder, PretrainHeads, load_encoder, save_encoder
+from mqa_rl.modules.answering.vqa import VQAModel, image_digest, load_vqa, vqa_module
+from mqa_rl.modules.answering.vqa_encoder import FrameEncoder, PretrainHeads, load_encoder, save_encoder
 from mqa_rl.training.frame_pack import load_frame_pack
 from mqa_rl.training.vqa_build import build_model
 from mqa_rl.training.vqa_data import Batches, encode_store, encoder_fingerprint, load_answering_records, pretraining_frames
@@ -363,7 +363,7 @@ def test_pretraining_frames_mix_stores_of_another_dataset_of_the_same_objects(sm
 def test_grounding_loss_teaches_the_classes_pool_which_class_a_question_names(small_dataset, answering_root, tmp_path):
     """Learnt from answers alone the classes pool's choice stayed near uniform; the grounding loss
     supervises it with the classes the question names (head h <-> the h-th class; -1 = none)."""
-    from mqa_rl.modules.vqa import grounding_module
+    from mqa_rl.modules.answering.vqa import grounding_module
     from mqa_rl.training.vqa_data import load_answering_records, question_class_labels
 
     root, _ = answering_root

@@ -5,7 +5,7 @@ import pytest
 import torch
 
 from mqa_rl import keys
-from mqa_rl.modules.privileged_policy import PrivilegedPushPolicy
+from mqa_rl.modules.push.privileged_policy import PrivilegedPushPolicy
 from mqa_rl.transforms.episode_stats import uncountable_share
 from conftest import compose_recipe_config, load_recipe
 

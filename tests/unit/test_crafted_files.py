@@ -82,11 +82,11 @@ class _RecognitionNet:
 def test_every_model_file_loader_refuses_a_pickled_payload(tmp_path, loader):
     """The model files a user is handed (a stop critic, a VQA, the perception, an encoder, a recognition file), each
     with a payload beside plausible keys: refused with ValueError naming the file, the payload never unpickled."""
-    from mqa_rl.modules.learned_stop import StopCritic
-    from mqa_rl.modules.perception import load_perception
-    from mqa_rl.modules.pretrained_recognition import load_recognition
-    from mqa_rl.modules.vqa import load_vqa
-    from mqa_rl.modules.vqa_encoder import load_encoder
+    from mqa_rl.modules.answering.perception import load_perception
+    from mqa_rl.modules.answering.vqa import load_vqa
+    from mqa_rl.modules.answering.vqa_encoder import load_encoder
+    from mqa_rl.modules.push.pretrained_recognition import load_recognition
+    from mqa_rl.modules.stop.learned_stop import StopCritic
 
     path = tmp_path / "crafted.pt"
     torch.save({"format": "anything", "version": 1, "state_dict": {}, "meta": Payload()}, path)

@@ -11,7 +11,7 @@ from mqa_rl import keys
 from mqa_rl.collectors.replay import REPLAY_KEYS, annealed_is_beta, compact_transitions, make_replay_buffer, transition_bytes
 from mqa_rl.envs import actions
 from mqa_rl.losses.dqn import make_dqn_loss
-from mqa_rl.modules.push_policy import make_push_qnet, make_q_actor
+from mqa_rl.modules.push.push_policy import make_push_qnet, make_q_actor
 from mqa_rl.sim.geometry import BinSpec, CameraSpec
 from torch_threads import one_torch_thread  # noqa: F401  (autouse)
 

@@ -10,13 +10,13 @@ from torchrl.data import Categorical
 
 from mqa_rl import keys
 from mqa_rl.envs import actions
-from mqa_rl.modules.learned_stop import FEATURES, LearnedStop, StopCritic, policy_fingerprint, stop_features
-from mqa_rl.modules.kept_frame import FrameKeeper
-from mqa_rl.modules.perceived_count import READING, PerceivedCount, file_sha256, reading_env_kwargs
-from mqa_rl.modules.perception import CountingPerception, save_perception
-from mqa_rl.modules.vote_counting import MAX_COUNT
-from mqa_rl.modules.push_policy import make_q_actor
-from mqa_rl.modules.push_qnet import PushQNet
+from mqa_rl.modules.stop.learned_stop import FEATURES, LearnedStop, StopCritic, policy_fingerprint, stop_features
+from mqa_rl.modules.answering.kept_frame import FrameKeeper
+from mqa_rl.modules.answering.perceived_count import READING, PerceivedCount, file_sha256, reading_env_kwargs
+from mqa_rl.modules.answering.perception import CountingPerception, save_perception
+from mqa_rl.modules.answering.vote_counting import MAX_COUNT
+from mqa_rl.modules.push.push_policy import make_q_actor
+from mqa_rl.modules.push.push_qnet import PushQNet
 from mqa_rl.training.optimal_stopping import fit_stop_critic, fixed_rules, realised_values, stopped_chi
 from torch_threads import one_torch_thread  # noqa: F401  (autouse)
 

@@ -3,7 +3,7 @@ import torch
 from tensordict import TensorDict
 
 from mqa_rl import keys
-from mqa_rl.modules.perception import CountingPerception
+from mqa_rl.modules.answering.perception import CountingPerception
 from mqa_rl.training.perception_maps import TILE, class_palette, perception_maps
 
 

@@ -5,7 +5,7 @@ named as such before anything is built (it used to fail deep inside with `Missin
 import pytest
 from conftest import REPO, compose_recipe_config, load_recipe
 
-from mqa_rl.modules.trained_policy import read_run_config
+from mqa_rl.modules.push.trained_policy import read_run_config
 
 
 def test_another_recipes_folder_is_named_not_a_missing_key(tmp_path):

@@ -9,7 +9,7 @@ from torchrl.modules import QValueModule
 
 from mqa_rl import keys
 from mqa_rl.envs import actions
-from mqa_rl.modules.stop_margin import StopMargin
+from mqa_rl.modules.stop.stop_margin import StopMargin
 from torch_threads import one_torch_thread  # noqa: F401  (autouse)
 
 

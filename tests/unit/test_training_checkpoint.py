@@ -13,7 +13,7 @@ from mqa_rl import keys
 from mqa_rl.collectors.replay import compact_transitions, make_replay_buffer
 from mqa_rl.envs import actions
 from mqa_rl.losses.dqn import make_dqn_loss
-from mqa_rl.modules.push_policy import make_explorer, make_push_qnet, make_q_actor
+from mqa_rl.modules.push.push_policy import make_explorer, make_push_qnet, make_q_actor
 from mqa_rl.training.checkpoint import TrainingCheckpoint
 from mqa_rl.verified_checkpoint import CheckpointCorrupt
 from test_dqn_learning import SMALL_NET, VOCAB, transitions

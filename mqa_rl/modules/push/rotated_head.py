@@ -25,7 +25,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from mqa_rl.modules.trunks import conv_stack
+from mqa_rl.modules.push.trunks import conv_stack
 
 
 def _branch(width: int, context: int, head_channels: tuple[int, ...]) -> nn.Sequential:

@@ -3,7 +3,7 @@
 Why: with ~1,200 training episodes a VQA's seed moves a Table III cell by up to 0.16 (docs/results.md,
 "Three VQA seeds"), more than any difference between policies; averaging the seeds' probabilities answers
 with less of that noise and costs only the extra forward passes. ``recipes/evaluate.py 'vqa_dir=[seed0_dir, seed1_dir]'`` uses it.
-It honours the public contract of ``mqa_rl.modules.vqa`` (``answer_probs``, ``answers``, ``tokenize``,
+It honours the public contract of ``mqa_rl.modules.answering.vqa`` (``answer_probs``, ``answers``, ``tokenize``,
 ``check_dataset``, ``meta``).
 """
 
@@ -13,7 +13,7 @@ from pathlib import Path
 
 import torch
 
-from mqa_rl.modules.vqa import VQAModel, load_vqa
+from mqa_rl.modules.answering.vqa import VQAModel, load_vqa
 
 
 class VQAEnsemble:

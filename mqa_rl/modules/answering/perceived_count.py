@@ -23,8 +23,8 @@ from tensordict import TensorDictBase
 from torch import nn
 
 from mqa_rl import keys
-from mqa_rl.modules.perception import CountingPerception, check_library, load_perception
-from mqa_rl.modules.vote_counting import MAX_COUNT, TOP, expected_counts
+from mqa_rl.modules.answering.perception import CountingPerception, check_library, load_perception
+from mqa_rl.modules.answering.vote_counting import MAX_COUNT, TOP, expected_counts
 
 READING = ("perceived_count", *(f"perceived_mass_{i}" for i in range(1, TOP + 1)), "perceived_log_area",
            "perceived_expected", "perceived_objects")

@@ -14,7 +14,7 @@ from torchrl.data import Composite
 from torchrl.modules import EGreedyModule, QValueActor
 
 from mqa_rl import keys
-from mqa_rl.modules.push_qnet import PushQNet
+from mqa_rl.modules.push.push_qnet import PushQNet
 
 QNET_OPTIONS = {"trunk", "weights", "light_channels", "light_downsample", "fuse_channels", "question_dim", "head_channels",
                 "head_context", "coords", "depth_scale", "freeze_trunk", "class_map", "rotated_head", "geometric_push"}

@@ -18,7 +18,7 @@ import torch
 from tensordict import TensorDictBase
 
 from mqa_rl import keys
-from mqa_rl.modules.perceived_count import READING, PerceivedCount, reading_env_kwargs, token_channels
+from mqa_rl.modules.answering.perceived_count import READING, PerceivedCount, reading_env_kwargs, token_channels
 
 EXPECTED = READING.index("perceived_expected")
 

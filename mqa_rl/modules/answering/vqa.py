@@ -28,7 +28,7 @@ Frame vector (``pool``):
   [2·21, 24, 24] instead of the bottleneck [32, 10, 10].
 
 * ``"counts"`` (ours, ``vqa=counting``): the encoder is the counting perception
-  (``mqa_rl.modules.perception``, frozen by default), which reads per class how many objects show ≥ 20 px,
+  (``mqa_rl.modules.answering.perception``, frozen by default), which reads per class how many objects show ≥ 20 px,
   its largest vote clusters and its area (``vote_counting.count_features``); the question picks the class
   (heads over the class channels, grounded) and an MLP reads what it picked plus how crowded the image
   is (docs/perception.md). ``freeze_encoder=False`` fine-tunes the perception through the same numbers
@@ -36,7 +36,7 @@ Frame vector (``pool``):
 
 Public contract (the web demo and ``recipes/evaluate.py`` use only this)::
 
-    from mqa_rl.modules.vqa import load_vqa
+    from mqa_rl.modules.answering.vqa import load_vqa
     model = load_vqa("runs/answering/vqa/counting-eqa/random")     # or the vqa.pt file itself
     probs = model.answer_probs(tokens, first_rgb, last_rgb)         # LongTensor [B, L], uint8 [B, H, W, 3] ×2
     model.answers[probs.argmax(-1)[0]]                              # e.g. "2"
@@ -62,10 +62,10 @@ from torch import nn
 from mqa_rl import keys
 from mqa_rl.data.vocab import PAD, UNK, words
 from mqa_rl.files import load_failure, refuse_nonfinite, write_atomic
-from mqa_rl.modules.push_qnet import QuestionEncoder
-from mqa_rl.modules import vote_counting
-from mqa_rl.modules.perception import CountingPerception, check_library
-from mqa_rl.modules.vqa_encoder import FrameEncoder, standardise
+from mqa_rl.modules.answering import vote_counting
+from mqa_rl.modules.answering.perception import CountingPerception, check_library
+from mqa_rl.modules.answering.vqa_encoder import FrameEncoder, standardise
+from mqa_rl.modules.push.push_qnet import QuestionEncoder
 
 VQA_FORMAT = "mqa_rl.vqa"
 VQA_VERSION = 1

@@ -34,7 +34,7 @@ Recognition is then learnt once from the segmentation of a few thousand renders 
 ImageNet features for it) and the DQN learns only where to push given t and depth; ``target_logits`` is
 logit(t), so the auxiliary target-map loss (``mqa_rl.losses.target_map``) trains the question's attention.
 
-``rotated_head`` (VPG's rotation sharing, ``mqa_rl.modules.rotated_head``): one push head scores "push
+``rotated_head`` (VPG's rotation sharing, ``mqa_rl.modules.push.rotated_head``): one push head scores "push
 right" on the state rotated for each of the 8 directions, so every demonstration and reward teaches all
 directions; same output layout.
 
@@ -54,8 +54,8 @@ import torch.nn.functional as F
 from torch import nn
 
 from mqa_rl.envs import actions
-from mqa_rl.modules.rotated_head import RotatedPushHead
-from mqa_rl.modules.trunks import conv_stack, make_trunk
+from mqa_rl.modules.push.rotated_head import RotatedPushHead
+from mqa_rl.modules.push.trunks import conv_stack, make_trunk
 
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)

@@ -19,7 +19,7 @@ counts 0.80 / 0.61 / 0.48 of the test questions right where a perfect instance c
 0.81 / 0.57 (docs/perception.md, "Why instances"): occlusion cuts one object into pieces and touching objects of a
 class merge. So every cell also *votes* for the centre of the visible part of its object (as
 Panoptic-DeepLab's offset head does): the pieces of one object vote for one place, two touching
-objects for two. ``mqa_rl.modules.vote_counting`` turns class probabilities and votes into clusters
+objects for two. ``mqa_rl.modules.answering.vote_counting`` turns class probabilities and votes into clusters
 whose mass is the object's visible area in 224-px pixels, which is the perfect counter's own rule
 (≥ 20 visible px). A third head reads counts without clustering: a density whose mass per countable
 object is one (spread over the object's visible cells, as crowd counting spreads a person), so that a
@@ -43,9 +43,9 @@ import torch.nn.functional as F
 from torch import nn
 
 from mqa_rl.files import load_versioned, refuse_nonfinite, save_versioned
-from mqa_rl.modules import vote_counting
-from mqa_rl.modules.imagenet_backbone import EfficientLiteEncoder
-from mqa_rl.modules.vqa_encoder import standardise
+from mqa_rl.modules.answering import vote_counting
+from mqa_rl.modules.answering.vqa_encoder import standardise
+from mqa_rl.modules.push.imagenet_backbone import EfficientLiteEncoder
 
 PERCEPTION_FORMAT = "mqa_rl.perception"
 PERCEPTION_VERSION = 2        # 2: the density head
@@ -112,7 +112,7 @@ class CountingPerception(nn.Module):
     ``widths``: channels at strides 2, 4, 8, 16 (the deepest sees ~100 px of the 112-px input: the
     whole of the largest object). ``detail``: channels of the full-resolution path (0: none; with it the
     input is 2 × ``image_size``). ``backbone="efficientnet_lite0"``: the encoder is EfficientNet-Lite0's
-    (``imagenet_backbone``; ``load_imagenet`` gives it ImageNet weights) reading the full render, and
+    (``push.imagenet_backbone``; ``load_imagenet`` gives it ImageNet weights) reading the full render, and
     ``widths`` are the decoder's (the fourth unused). ``depth``: a fourth input channel, the standardised depth
     image (``predict`` then needs it). Votes are in output cells, relative to the cell's centre."""
 

@@ -30,9 +30,9 @@ from torch import nn
 from mqa_rl import keys
 from mqa_rl.envs import actions
 from mqa_rl.files import load_versioned, save_versioned
-from mqa_rl.modules.perceived_count import READING, PerceivedCount, reading_env_kwargs
-from mqa_rl.modules.push_qnet import PushQNet
-from mqa_rl.modules.q_override import best_allowed_push, take_action
+from mqa_rl.modules.answering.perceived_count import READING, PerceivedCount, reading_env_kwargs
+from mqa_rl.modules.push.push_qnet import PushQNet
+from mqa_rl.modules.stop.q_override import best_allowed_push, take_action
 
 CRITIC_FORMAT = "mqa_rl.stop_critic"
 CRITIC_VERSION = 1

@@ -14,7 +14,7 @@ from omegaconf import OmegaConf
 from torchrl.checkpoint import Checkpoint, CheckpointRotation
 
 from mqa_rl import keys
-from mqa_rl.modules.push_policy import make_push_qnet, make_q_actor
+from mqa_rl.modules.push.push_policy import make_push_qnet, make_q_actor
 from mqa_rl.verified_checkpoint import CheckpointCorrupt, IntegrityAdapter, newest_checkpoint
 
 
