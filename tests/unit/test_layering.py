@@ -1,6 +1,7 @@
 """The house's layering, read from the source (every import, also those inside functions): each package of
 mqa_rl imports only from the layers below it, so no two packages import each other and the env never
-imports the reward transforms, the policies or the learners built on it."""
+imports the reward transforms, the policies or the learners built on it. Inside modules/ the same holds for
+its parts: the push policy, the answering half and the stops, each in its own sub-package."""
 
 import ast
 from pathlib import Path
@@ -85,3 +86,33 @@ def test_no_module_imports_itself_through_others():
     for m in sorted(g):
         if m not in state:
             visit(m, [m])
+
+
+# Inside modules: the push policy's network and policies, the answering half (which reads the push network's question
+# encoder and its ImageNet backbone), the stops (which read both), then the builder of a system's policy from its spec
+# and the registry of systems over it. The same rule one level down: each part imports only from the parts below it.
+MODULE_PARTS = (
+    ("push",),                                  # the Q-network, its trunks and heads, the policies that push
+    ("answering",),                             # the VQA, the counting perception, the frame the answer reads
+    ("stop",),                                  # when a policy stops
+    ("frozen_policies",),                       # a system's policy from its spec
+    ("systems",),                               # the systems by id
+)
+MODULE_PART = {name: i for i, names in enumerate(MODULE_PARTS) for name in names}
+
+
+def part(module: str) -> str | None:
+    """``push`` for ``mqa_rl.modules.push.push_qnet``; None for modules outside ``mqa_rl.modules`` or the package itself."""
+    parts = module.split(".")
+    return parts[2] if len(parts) > 2 and parts[1] == "modules" else None
+
+
+def test_every_module_of_modules_is_placed_in_a_part():
+    unplaced = {part(m) for m in modules() if part(m) is not None} - set(MODULE_PART)
+    assert not unplaced, f"place {sorted(unplaced)} in MODULE_PARTS (a sub-package of modules/, or a file at its top)"
+
+
+def test_the_parts_of_modules_import_only_from_the_parts_below():
+    upward = sorted(f"{m} imports {t}" for m, targets in graph().items() if part(m) is not None for t in targets
+                    if part(t) is not None and part(t) != part(m) and MODULE_PART[part(t)] >= MODULE_PART[part(m)])
+    assert not upward, "\n".join(upward)
