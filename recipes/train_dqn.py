@@ -220,7 +220,7 @@ def _train(cfg: DictConfig, out: Path, created: bool) -> dict:
     env_cfg = OmegaConf.to_container(cfg.env)
     env_kwargs = dict(dataset=str(cfg.dataset), reward=OmegaConf.to_container(cfg.reward), episode_stats=True, **env_cfg)
     eval_env = make_mqa_env(**{**env_kwargs, "split": cfg.eval.split, "difficulties": cfg.eval.difficulties},
-                            seed=cfg.seed + 10_000)
+                            counter=counter, seed=cfg.seed + 10_000)          # its reward at the training's β
     vocab = eval_env.observation_spec[keys.QUESTION].space.n
     device = learner_device(cfg.device)
     classes = eval_env.base_env.dataset.classes

@@ -21,6 +21,7 @@ from mqa_rl.modules.push.random_policy import RandomMQAPolicy
 from mqa_rl.modules.push.trained_policy import load_greedy
 from mqa_rl.modules.stop.learned_stop import LearnedStop
 from mqa_rl.modules.stop.stop_margin import StopMargin
+from mqa_rl.transforms.beta import trained_counter
 from mqa_rl.transforms.mqa_env import make_mqa_env
 
 # The policies a unit runs beside greedy: the registry's systems that need no run (their specs travel in the setup).
@@ -31,7 +32,8 @@ _ENVS: dict = {}            # this process's env per level: a unit reuses it (lo
 
 def unit_env(setup: dict, level: str):
     if level not in _ENVS:
-        _ENVS[level] = make_mqa_env(setup["dataset"], setup["reward"], episode_stats=True, split=setup["split"],
+        _ENVS[level] = make_mqa_env(setup["dataset"], setup["reward"], trained_counter(setup["reward"]),
+                                    episode_stats=True, split=setup["split"],
                                     difficulties=[level], question_types=setup["qtypes"], max_pushes=setup["max_pushes"],
                                     pusher=setup["pusher"], push_memory=setup["push_memory"],
                                     **setup.get("frames", {}))

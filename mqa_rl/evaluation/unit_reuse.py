@@ -38,7 +38,7 @@ def episodes_meta(cfg: DictConfig, dataset, level: str, qtypes, max_pushes: int,
     (its metrics are read by that perception, for every policy)."""
     return {"dataset": dataset_fingerprint(dataset), "split": cfg.split, "seed": int(cfg.seed), "level": level,
             "episodes": int(cfg.episodes_per_level), "max_pushes": max_pushes, "pusher": cfg.pusher,
-            "question_types": list(qtypes) if qtypes else None, "reward": reward, "push_memory": push_memory,
+            "question_types": list(qtypes) if qtypes else None, "reward": reward, "reward_beta": "final", "push_memory": push_memory,
             "kept_frame": kept_frame}
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import torch
 
 from mqa_rl import keys
@@ -51,3 +53,9 @@ class BetaSchedule(RewardTerm):
     def _reset(self, tensordict, tensordict_reset):
         tensordict_reset.set(self.out_key, self.compute(None, tensordict_reset))
         return tensordict_reset
+
+
+def trained_counter(reward: dict) -> torch.Tensor:
+    """β's step counter at the end of its schedule (β = β_T): the reward a trained policy was trained towards, for
+    evaluations (a fresh counter would report β = 1: R_e and the stop terms alone)."""
+    return torch.tensor(math.ceil(float(reward.get("beta_horizon", 2000))), dtype=torch.int64)

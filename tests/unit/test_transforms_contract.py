@@ -189,3 +189,12 @@ def test_reward_clip_clamps_the_total():
                       keys.SIMPLE_SCENE: torch.zeros(3, 1), keys.IS_STOP: torch.tensor([[False], [False], [True]]),
                       (keys.REWARD_TERMS, "local_occlusion"): torch.tensor([[0.0], [-7.0], [0.0]])}, batch_size=[3])
     assert r.reward(nxt).squeeze(-1).tolist() == [1.0, -1.0, -1.0]
+
+
+def test_an_evaluation_reads_the_reward_at_the_end_of_the_beta_schedule():
+    from mqa_rl.transforms.beta import BetaSchedule, trained_counter
+
+    for reward in ({"beta_horizon": 2000, "beta_final": 0.5}, {"beta_horizon": 7.5, "beta_final": 0.2}):
+        schedule = BetaSchedule(reward["beta_horizon"], trained_counter(reward), final=reward["beta_final"])
+        assert schedule.beta == pytest.approx(reward["beta_final"])          # not 1: R_e alone
+    assert BetaSchedule(2000, trained_counter({}), final=0.5).beta == pytest.approx(0.5)   # the configs' default T
