@@ -161,6 +161,8 @@ def _evaluate(cfg: DictConfig) -> dict:
         reused = reuse_episodes(out, name, meta, needs)        # a killed evaluation resumes
         if reused is None and cfg.baseline_from and name != "greedy":
             reused = reuse_episodes(cfg.baseline_from, name, meta, needs)
+            if reused is not None:       # kept here too: evaluations taking this one as their baseline find them
+                record_unit(out, meta, cfg.video_format, (level, name), (reused, []))
         if reused is not None:
             metrics[level, name] = reused
         else:

@@ -92,6 +92,7 @@ def test_tiny_training_run_evaluation_and_curves(small_dataset_dir, tmp_path):
                 "policies=[greedy,random]", "video_episodes=0", f"baseline_from={ev}", f"out_dir={ev2}", cwd=tmp_path)
     assert "random: reused" in out2.stdout
     assert json.loads((ev2 / "results.json").read_text())["easy"]["random"] == res["easy"]["random"]
+    assert (ev2 / "episodes" / "random_easy.pt").is_file()   # kept there too: a baseline for the evaluations after it
     ev3 = tmp_path / "eval3"                                   # other questions (another seed): not reused
     out3 = _run(str(ROOT / "recipes" / "evaluate_policy.py"), f"run={run}", "episodes_per_level=2", "difficulties=[easy]",
                 "policies=[random,image_teacher,no_manipulation]", "question_types=[counting]", "seed=5", f"baseline_from={ev}", f"out_dir={ev3}",
