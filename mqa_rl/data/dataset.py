@@ -238,17 +238,11 @@ def _settle_all(jobs, assets, bin_spec, camera, workers: int, show: bool) -> lis
         _init_worker(assets, bin_spec, camera)
         return list(shown(map(_settle_one, jobs)))
     import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures import ProcessPoolExecutor
 
-    results: list = [None] * len(jobs)
     with ProcessPoolExecutor(min(workers, len(jobs)), mp_context=multiprocessing.get_context("spawn"),
                              initializer=_init_worker, initargs=(assets, bin_spec, camera)) as pool:
-        # the largest piles first, the small ones fill the gaps: no slow pile settles alone at the end
-        order = sorted(range(len(jobs)), key=lambda i: -jobs[i][2])
-        futures = {pool.submit(_settle_one, jobs[i]): i for i in order}
-        for done in shown(as_completed(futures)):
-            results[futures[done]] = done.result()
-    return results
+        return list(shown(pool.map(_settle_one, jobs)))
 
 
 # ----------------------------------------------------------------------------------------- loading
