@@ -18,7 +18,6 @@ from __future__ import annotations
 import mqa_rl  # noqa: F401  (first: sets OMP_WAIT_POLICY before torch loads)
 
 import copy
-import random
 import shutil
 import time
 import warnings
@@ -53,6 +52,7 @@ from mqa_rl.training.signals import exit_on_sigterm
 from mqa_rl.verified_checkpoint import newest_checkpoint, restore_verified
 from mqa_rl.envs.dihedral import DihedralAugment
 from mqa_rl.transforms.mqa_env import make_mqa_env
+from mqa_rl.training.seeding import seed_run
 
 
 def check_config(cfg: DictConfig) -> None:
@@ -208,11 +208,7 @@ def _train(cfg: DictConfig, out: Path, created: bool) -> dict:
     fresh = newest_checkpoint(CheckpointRotation(out / "checkpoints", keep_last=1)) is None
     refuse_unresumable(out, not fresh, bool(cfg.resume))
     init = initial_checkpoint(cfg.init_from) if cfg.get("init_from") and fresh else None
-    torch.manual_seed(cfg.seed)
-    np.random.seed(cfg.seed)
-    random.seed(cfg.seed)
-    if cfg.threads:
-        torch.set_num_threads(cfg.threads)
+    seed_run(cfg.seed, cfg.threads)
     col, buf = cfg.collector, cfg.buffer
 
     # ---- env (the eval env doubles as the proof env that sizes the network)

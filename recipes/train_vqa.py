@@ -20,7 +20,6 @@ import mqa_rl  # noqa: F401  (first: sets OMP_WAIT_POLICY before torch loads)
 
 import json
 import math
-import random
 import time
 from pathlib import Path
 
@@ -48,6 +47,7 @@ from mqa_rl.training.vqa_data import (Batches, encode_store, load_answering_reco
                                      encoder_fingerprint)
 from mqa_rl.envs.dihedral import DIHEDRAL
 from mqa_rl.progress import Progress
+from mqa_rl.training.seeding import seed_run
 
 # validation metric that picks the kept checkpoint -> its score (higher is better)
 SELECT = {"accuracy": lambda m: m["val/accuracy"], "loss": lambda m: -m["val/loss"]}
@@ -109,11 +109,7 @@ def train(cfg: DictConfig) -> dict:
 
 
 def _train(cfg: DictConfig, out: Path) -> dict:
-    torch.manual_seed(cfg.seed)
-    np.random.seed(cfg.seed)
-    random.seed(cfg.seed)
-    if cfg.threads:
-        torch.set_num_threads(cfg.threads)
+    seed_run(cfg.seed, cfg.threads)
     device = torch.device(cfg.device)
     meta = read_meta(cfg.rollouts)
     split = check_training_rollouts(meta, cfg.rollouts)

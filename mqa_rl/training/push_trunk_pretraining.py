@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import json
 import os
-import random
 import shutil
 import time
 from pathlib import Path
@@ -45,6 +44,7 @@ from mqa_rl.training.run_logger import RunLogger
 from mqa_rl.training.vqa_data import scene_split
 from mqa_rl.envs.dihedral import random_dihedral_in
 from mqa_rl.progress import Progress
+from mqa_rl.training.seeding import seed_run
 
 RECOGNITION_FILE = "recognition.pt"
 
@@ -132,11 +132,7 @@ def pretrain_push_trunk(cfg: DictConfig) -> dict:
         raise FileNotFoundError(f"dataset {cfg.dataset} does not exist: make it with recipes/make_dataset.py")
     out = Path(cfg.out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    torch.manual_seed(cfg.seed)
-    np.random.seed(cfg.seed)
-    random.seed(cfg.seed)
-    if cfg.threads:
-        torch.set_num_threads(cfg.threads)
+    seed_run(cfg.seed, cfg.threads)
     dataset = MQADataset(cfg.dataset)
     if t.steps:
         frames = labelled_frames(cfg, dataset, out)

@@ -34,6 +34,7 @@ from mqa_rl.training.run_logger import RunLogger, trim_scalars
 from mqa_rl.training.vqa_data import pretraining_frames, scene_split
 from mqa_rl.envs.dihedral import random_dihedral_in
 from mqa_rl.progress import Progress
+from mqa_rl.training.seeding import seed_run
 
 ENCODER_FILE = "encoder.pt"
 
@@ -83,11 +84,7 @@ def pretrain_vqa_encoder(cfg: DictConfig) -> dict:
         raise ValueError("train.steps, train.batch_size, train.eval_interval and checkpoint.interval_steps must be positive")
     out = Path(cfg.out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    torch.manual_seed(cfg.seed)
-    np.random.seed(cfg.seed)
-    random.seed(cfg.seed)
-    if cfg.threads:
-        torch.set_num_threads(cfg.threads)
+    seed_run(cfg.seed, cfg.threads)
     device = torch.device(cfg.device)
     t0 = time.perf_counter()
     frames, source = read_frames(cfg)
